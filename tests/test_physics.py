@@ -1,0 +1,145 @@
+"""The compiled step against its numpy reference, energy, dissipation, convergence."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import make_joint
+
+from hdgym.effects import DISSIPATIVE, EFFECTS, flags_of
+from hdgym.physics import kernel, reference
+from hdgym.physics import layout as L
+
+
+def _batch(params_list, locked=False, motor_angle=0.3):
+    ps = np.stack([L.pack(p) for p in params_list])
+    flags = np.array([flags_of(p.effects, locked) for p in params_list], dtype=np.int64)
+    xs = L.initial_state(ps, flags, motor_angle, 0.0 if locked else None)
+    return xs, ps, flags
+
+
+def _run_both(params_list, current, steps, locked=False, n_sub=10, dt=1e-4, t_ext=0.0):
+    xs, ps, flags = _batch(params_list, locked)
+    n = len(params_list)
+    xk = xs.copy()
+    xr = xs.copy()
+    bad = np.zeros(n, dtype=np.bool_)
+    for k in range(steps):
+        u = np.full(n, current(k))
+        te = np.full(n, t_ext)
+        kernel.step_serial(xk, ps, u, te, dt, n_sub, flags, bad)
+        xr = reference.step(xr, ps, u, te, dt, n_sub, flags)
+    return xk, xr
+
+
+@pytest.mark.parametrize("hyst", ["maxwell", "tanh"])
+@pytest.mark.parametrize("comp", ["cubic", "two_segment", "three_segment", "linear"])
+def test_kernel_matches_reference(hyst, comp):
+    joints = [make_joint(hyst, comp), make_joint(hyst, comp, grounded="circular_spline"),
+              make_joint(hyst, comp).without("stribeck_friction", "stiction"),
+              make_joint(hyst, comp).without(*EFFECTS)]
+    xk, xr = _run_both(joints, lambda k: 4.0 * np.sin(0.02 * k) + 1.0, 400)
+    scale = np.maximum(np.abs(xr), 1.0)
+    assert np.all(np.isfinite(xk))
+    np.testing.assert_allclose(xk / scale, xr / scale, rtol=0, atol=1e-9)
+
+
+def test_kernel_matches_reference_locked(joint):
+    xk, xr = _run_both([joint], lambda k: 2.0 * np.sin(0.05 * k), 300, locked=True)
+    np.testing.assert_allclose(xk, xr, rtol=1e-9, atol=1e-12)
+    assert xk[0, L.W_O] == 0.0 and xk[0, L.TH_O] == 0.0
+
+
+def test_parallel_equals_serial(joint):
+    xs, ps, flags = _batch([joint] * 8)
+    ps[:, L.K1] *= np.linspace(0.8, 1.2, 8)
+    a, b = xs.copy(), xs.copy()
+    bad = np.zeros(8, dtype=np.bool_)
+    u = np.linspace(1, 5, 8)
+    z = np.zeros(8)
+    for _ in range(50):
+        kernel.step_serial(a, ps, u, z, 1e-4, 10, flags, bad)
+        kernel.step_parallel(b, ps, u, z, 1e-4, 10, flags, bad)
+    assert np.array_equal(a, b)
+
+
+def test_energy_conserved_without_dissipation(joint):
+    """All dissipative effects off, no damping: energy drift stays small over 10 s."""
+    p = joint.without(*DISSIPATIVE).set("compliance.damping", 0.0).set("load.gravity", 0.0)
+    xs, ps, flags = _batch([p])
+    # wind the spring up and let it ring, with the motor spinning through the KE
+    xs[:, L.W_M] = 60.0
+    xs[:, L.TH_O] -= 1e-3
+    e0 = reference.mechanical_energy(xs, ps, flags)[0]
+    bad = np.zeros(1, dtype=np.bool_)
+    zeros = np.zeros(1)
+    drift = []
+    for _ in range(10_000):  # 10 s at 1 ms
+        kernel.step_serial(xs, ps, zeros, zeros, 1e-4, 10, flags, bad)
+        drift.append(reference.mechanical_energy(xs, ps, flags)[0] - e0)
+    assert not bad.any()
+    assert max(abs(d) for d in drift) < 0.01 * e0, (e0, max(drift), min(drift))
+    assert abs(drift[-1]) < 0.005 * e0
+
+
+def test_dissipation_never_negative_and_energy_balance(joint):
+    """Every effect on: dissipated energy never decreases and the balance closes."""
+    xs, ps, flags = _batch([joint])
+    e0 = reference.mechanical_energy(xs, ps, flags)[0]
+    bad = np.zeros(1, dtype=np.bool_)
+    rng = np.random.default_rng(1)
+    last = 0.0
+    for k in range(4000):
+        u = np.array([6.0 * np.sin(0.003 * k) + rng.normal(0, 1)])
+        kernel.step_serial(xs, ps, u, np.zeros(1), 1e-4, 10, flags, bad)
+        assert xs[0, L.E_DISS] >= last - 1e-15
+        last = xs[0, L.E_DISS]
+    e = reference.mechanical_energy(xs, ps, flags)[0]
+    inflow = xs[0, L.W_MOTOR] + xs[0, L.W_LOAD]
+    assert last > 0
+    # closes to a few percent of the energy that went through the joint
+    assert abs(e - e0 + last - inflow) < 0.03 * (abs(inflow) + last)
+
+
+def test_substep_halving_converges(joint):
+    """A non-resonant trajectory changes little when the substep is halved."""
+    p = joint.without("stiction", "stribeck_friction")
+
+    def run(n_sub):
+        xs, ps, flags = _batch([p])
+        bad = np.zeros(1, dtype=np.bool_)
+        out = []
+        for k in range(500):
+            u = np.array([1.5 + 0.5 * np.sin(0.01 * k)])
+            kernel.step_serial(xs, ps, u, np.zeros(1), 1e-3 / n_sub, n_sub, flags, bad)
+            out.append(xs[0, [L.TH_M, L.TH_O]].copy())
+        return np.array(out)
+
+    a, b = run(10), run(20)
+    err = np.max(np.abs(a - b), axis=0) / np.max(np.abs(b), axis=0)
+    assert np.all(err < 2e-3), err
+
+
+def test_divergence_flagged():
+    p = make_joint().set("integration.n_substeps", 1).set("compliance.damping", 0.0)
+    xs, ps, flags = _batch([p.without(*DISSIPATIVE)])
+    ps[:, L.K1] *= 1e6  # far too stiff for the step
+    bad = np.zeros(1, dtype=np.bool_)
+    for _ in range(200):
+        kernel.step_serial(xs, ps, np.ones(1), np.zeros(1), 1e-3, 1, flags, bad)
+        if bad.any():
+            break
+    assert bad.any()
+
+
+def test_stiction_holds_below_breakaway(joint):
+    """With the output locked and a current below breakaway the motor does not move."""
+    xs, ps, flags = _batch([joint.without("kinematic_error", "hysteresis")])
+    bad = np.zeros(1, dtype=np.bool_)
+    th0 = xs[0, L.TH_M]
+    small = 0.5 * joint.friction.input.breakaway / joint.motor.torque_constant
+    for _ in range(200):
+        kernel.step_serial(xs, ps, np.array([small]), np.zeros(1), 1e-4, 10, flags, bad)
+    # the motor winds the spring but output friction (breakaway 3 N m) holds the output
+    assert xs[0, L.W_O] == 0.0
+    assert abs(xs[0, L.TH_M] - th0) < 1e-2
