@@ -1,0 +1,137 @@
+"""Benchmarks behind ``hdgym bench``: throughput as ratios against references
+measured in the same run, written to ``results/bench.md``.
+
+No benchmark here asserts a time: machines are shared and noisy. Each row
+states the measured value, the reference measured right beside it, and the
+target the issue set.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from hdgym.effects import flags_of
+from hdgym.params import JointParams, atomic_write_text, preset
+from hdgym.physics import kernel
+from hdgym.physics import layout as L
+
+
+@nb.njit(cache=True, parallel=True, nogil=True)
+def _bare_loop(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray, dt: float,
+               n_sub: int, flags: np.ndarray, n_steps: int) -> None:
+    """The same physics step, all control periods inside one compiled call."""
+    for e in nb.prange(xs.shape[0]):
+        for _ in range(n_steps):
+            kernel.substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e])
+
+
+def best_rate(fn: Callable[[], None], units: float, repeats: int = 3) -> float:
+    """Best units/s of ``repeats`` timed calls of ``fn`` (after one warm-up call)."""
+    fn()
+    best = 0.0
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = max(best, units / (time.perf_counter() - t0))
+    return best
+
+
+def bench_physics(p: JointParams, quick: bool = False) -> list[dict]:
+    """Env-steps/s of the compiled step at 1, 64 and 1,024 envs, stepped from Python
+    once per control period, beside the bare compiled loop of the same step."""
+    n_sub = int(p.integration.n_substeps)
+    dt = p.integration.ctrl_dt / n_sub
+    rows = []
+    for n in (1, 64, 1024):
+        steps = max(20, (2000 if not quick else 200) * (64 if n == 1 else 1) // max(1, n // 64))
+        ps = L.pack_batch(p, n)
+        flags = np.full(n, flags_of(p.effects), dtype=np.int64)
+        u = np.linspace(1.0, 4.0, n)
+        z = np.zeros(n)
+        bad = np.zeros(n, dtype=np.bool_)
+        step = kernel.step_parallel if n >= 64 else kernel.step_serial
+        xs = L.initial_state(ps, flags)
+
+        def stepped(xs=xs, ps=ps, u=u, z=z, flags=flags, bad=bad, step=step, steps=steps):
+            for _ in range(steps):
+                step(xs, ps, u, z, dt, n_sub, flags, bad)
+
+        xb = xs.copy()
+
+        def bare(xb=xb, ps=ps, u=u, z=z, flags=flags, steps=steps):
+            _bare_loop(xb, ps, u, z, dt, n_sub, flags, steps)
+
+        r_step = best_rate(stepped, n * steps)
+        r_bare = best_rate(bare, n * steps)
+        rows.append({
+            "name": f"physics, {n} env{'s' if n > 1 else ''}, stepped from Python",
+            "value": r_step, "unit": "env-steps/s", "reference": "bare compiled loop",
+            "reference_value": r_bare, "ratio": r_step / r_bare,
+            "substeps_per_s": r_step * n_sub,
+            "target": "≥ 1,000,000 env-steps/s at 1,024 envs" if n == 1024 else "",
+            "met": (r_step >= 1e6) if n == 1024 else None,
+        })
+    return rows
+
+
+def _fmt(v: float) -> str:
+    return f"{v:,.0f}" if v >= 100 else f"{v:.3g}"
+
+
+def write_report(sections: dict[str, list[dict]], path: Path, command: str) -> None:
+    """Write the bench tables as markdown (atomically)."""
+    lines = [
+        "# hdgym benchmarks", "",
+        f"Regenerate with `{command}`. Machine: {platform.machine()}, "
+        f"{nb.config.NUMBA_NUM_THREADS} numba threads, Python {platform.python_version()}, "
+        f"numba {nb.__version__}, numpy {np.__version__}. Every ratio is against a reference "
+        "measured in the same run.", "",
+    ]
+    for title, rows in sections.items():
+        lines += [f"## {title}", "", "| benchmark | value | reference | reference value | ratio "
+                  "| target | met |", "|---|---|---|---|---|---|---|"]
+        for r in rows:
+            met = r.get("met")
+            lines.append(
+                f"| {r['name']} | {_fmt(r['value'])} {r.get('unit', '')} | {r.get('reference', '')}"
+                f" | {_fmt(r['reference_value']) if r.get('reference_value') else ''} | "
+                f"{r['ratio']:.3g} | {r.get('target', '')} | "
+                f"{'' if met is None else ('yes' if met else 'NO')} |"
+                if r.get("ratio") is not None else
+                f"| {r['name']} | {_fmt(r['value'])} {r.get('unit', '')} | | | | "
+                f"{r.get('target', '')} | {'' if met is None else ('yes' if met else 'NO')} |")
+        notes = [r["note"] for r in rows if r.get("note")]
+        lines += [""] + [f"- {n}" for n in notes] + ([""] if notes else [])
+    atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def run(quick: bool = False, out: Path = Path("results/bench.md")) -> dict[str, list[dict]]:
+    """Run every benchmark and write the report."""
+    p = preset("tuttle-joint1")
+    sections: dict[str, list[dict]] = {}
+    rows = bench_physics(p, quick)
+    for r in rows:
+        r["note"] = None
+    rows[-1]["note"] = (f"substeps/s at 1,024 envs: {rows[-1]['substeps_per_s']:,.0f} "
+                        f"({p.integration.n_substeps} substeps per 1 ms step)")
+    sections["Physics step (tuttle-joint1, every effect on)"] = rows
+    try:
+        from hdgym.envs.bench import bench_envs
+    except ImportError:
+        bench_envs = None
+    if bench_envs is not None:
+        sections["Gymnasium environments"] = bench_envs(quick)
+    try:
+        from hdgym.discrepancy.bench import bench_diagnose
+    except ImportError:
+        bench_diagnose = None
+    if bench_diagnose is not None:
+        sections["Discrepancy workflow"] = bench_diagnose(quick)
+    write_report(sections, out, "hdgym bench" + (" --quick" if quick else ""))
+    return sections

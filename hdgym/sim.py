@@ -1,0 +1,225 @@
+"""Simulator: run a joint on a command signal, open or closed loop, into a Record.
+
+Rows follow the zero-order-hold convention of a data logger: row ``k`` holds
+the state measured at ``time[k] = k * ctrl_dt`` and the command applied from
+``time[k]`` to ``time[k+1]``. So re-simulating a record's command from its
+first state reproduces it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from hdgym.commands import command_signal
+from hdgym.effects import flags_of
+from hdgym.hardware import CHANNELS, SensorBank
+from hdgym.params import JointParams
+from hdgym.physics import kernel
+from hdgym.physics import layout as L
+from hdgym.record import Record
+
+
+class SimulationError(RuntimeError):
+    """The integration diverged; the message says when and which state."""
+
+
+class Controller(Protocol):
+    """What the closed-loop runner drives: measurements in, current command (A) out."""
+
+    def reset(self) -> None: ...
+
+    def __call__(self, t: float, measurement: Mapping[str, float]) -> float: ...
+
+
+def diverged_message(states: np.ndarray, k: int, dt: float) -> str:
+    """Which state went bad at step ``k``."""
+    row = states[k] if states.ndim == 2 else states
+    for j, name in enumerate(L.STATE_NAMES):
+        if not np.isfinite(row[j]):
+            return f"simulation diverged at t = {k * dt:.6g} s: state {name} = {row[j]!r}"
+    worst = int(np.argmax(np.abs(row[: L.HZ])))
+    return (f"simulation diverged at t = {k * dt:.6g} s: state {L.STATE_NAMES[worst]} = "
+            f"{row[worst]:.3g} (runaway; is the substep too large for this drive?)")
+
+
+def _signal(value: float | np.ndarray | str | None, time: np.ndarray, what: str,
+            rng: np.random.Generator) -> np.ndarray:
+    if value is None:
+        return np.zeros(time.shape)
+    if np.isscalar(value) and not isinstance(value, str):
+        value = np.full(time.shape, float(value))
+    out = command_signal(value, time, rng)
+    if not np.all(np.isfinite(out)):
+        raise ValueError(f"{what}: not finite")
+    return out
+
+
+@dataclass
+class Simulator:
+    """A joint, ready to run.
+
+    Args:
+        params: the joint (effects switched in ``params.effects``).
+        locked_output: clamp the output port (torsion experiments).
+        sensors: record what the hardware measures (quantized encoders,
+            velocity from counts, sensor noise); False records true states.
+    """
+
+    params: JointParams
+    locked_output: bool = False
+    sensors: bool = True
+    row: np.ndarray = field(init=False, repr=False)
+    flags: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.row = L.pack(self.params)
+        self.flags = flags_of(self.params.effects, self.locked_output)
+
+    @property
+    def ctrl_dt(self) -> float:
+        return self.params.integration.ctrl_dt
+
+    @property
+    def n_substeps(self) -> int:
+        return int(self.params.integration.n_substeps)
+
+    def initial_state(self, motor_angle: float = 0.0) -> np.ndarray:
+        """At rest, spring relaxed (output at zero if locked)."""
+        out = 0.0 if self.locked_output else None
+        return L.initial_state(self.row[None, :], self.flags, motor_angle, out)[0]
+
+    def time(self, duration: float) -> np.ndarray:
+        n = int(round(duration / self.ctrl_dt))
+        if not (duration > 0 and n >= 2):
+            raise ValueError(f"duration must be at least two control periods, got {duration!r} s")
+        return np.arange(n) * self.ctrl_dt
+
+    def run(self, command: str | np.ndarray, duration: float | None = None, *, seed: int = 0,
+            load_torque: float | np.ndarray | str | None = None,
+            state: np.ndarray | None = None) -> Record:
+        """Open-loop run of a current command.
+
+        Args:
+            command: a command spec (see :mod:`hdgym.commands`) or an array of
+                currents, A, one per control period.
+            duration: s (needed for a spec; an array sets its own length).
+            seed: seeds the ``random`` command and the sensor noise.
+            load_torque: external load torque, N m (scalar, array or spec).
+            state: initial state (default: at rest, spring relaxed).
+        """
+        t, u, tl, states = self.trajectory(command, duration, seed=seed,
+                                           load_torque=load_torque, state=state)
+        return self._record(t, u, tl, states, np.random.default_rng([seed, 1]))
+
+    def trajectory(self, command: str | np.ndarray, duration: float | None = None, *,
+                   seed: int = 0, load_torque: float | np.ndarray | str | None = None,
+                   state: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Like :meth:`run` but return the true states: ``(time, command, load, states)``.
+
+        ``states`` has shape ``(n, N_STATE)`` (columns in
+        :data:`hdgym.physics.layout.STATE_NAMES`).
+        """
+        if duration is None:
+            if isinstance(command, str):
+                raise ValueError("duration is needed for a command spec")
+            duration = len(command) * self.ctrl_dt
+        t = self.time(duration)
+        rng = np.random.default_rng(seed)
+        u = _signal(command, t, "command", rng)
+        tl = _signal(load_torque, t, "load_torque", rng)
+        x = self.initial_state() if state is None else np.array(state, dtype=float)
+        states = np.empty((t.size, L.N_STATE))
+        states[0] = x
+        bad = kernel.run_open_loop(x, self.row, u[:-1], tl[:-1], self.ctrl_dt / self.n_substeps,
+                                   self.n_substeps, self.flags, states[1:])
+        if bad >= 0:
+            raise SimulationError(diverged_message(states[1:], bad, self.ctrl_dt))
+        return t, u, tl, states
+
+    def run_closed_loop(self, controller: Controller | Callable[[float, Mapping[str, float]], float],
+                        duration: float, *, reference: Callable[[float], float] | None = None,
+                        seed: int = 0, load_torque: float | np.ndarray | str | None = None,
+                        state: np.ndarray | None = None) -> Record:
+        """Closed-loop run: each period the controller sees the measurements and returns A.
+
+        The measurement mapping has the channels of :data:`hdgym.hardware.CHANNELS`
+        plus ``reference`` (output rad, when given) and ``time``.
+        """
+        t = self.time(duration)
+        rng = np.random.default_rng(seed)
+        tl = _signal(load_torque, t, "load_torque", rng)
+        x = self.initial_state() if state is None else np.array(state, dtype=float)
+        bank = self._bank(rng)
+        xs = x[None, :]
+        reading = bank.reset(xs)
+        if hasattr(controller, "reset"):
+            controller.reset()
+        states = np.empty((t.size, L.N_STATE))
+        meas = np.empty((t.size, len(CHANNELS)))
+        u = np.zeros(t.size)
+        ref = np.full(t.size, np.nan)
+        dt = self.ctrl_dt / self.n_substeps
+        for k in range(t.size):
+            states[k] = x
+            meas[k] = reading[:, 0]
+            m = {name: float(reading[j, 0]) for j, name in enumerate(CHANNELS)}
+            m["time"] = float(t[k])
+            if reference is not None:
+                ref[k] = m["reference"] = float(reference(float(t[k])))
+            cmd = float(controller(float(t[k]), m))
+            if not np.isfinite(cmd):
+                raise ValueError(f"controller returned {cmd!r} at t = {t[k]:.6g} s")
+            u[k] = cmd
+            if k + 1 < t.size:
+                kernel.substeps(x, self.row, cmd, tl[k], dt, self.n_substeps, self.flags)
+                if kernel._bad(x):
+                    raise SimulationError(diverged_message(x, k, self.ctrl_dt))
+                reading = bank.measure(xs)
+        extra = {"reference": ref} if reference is not None else {}
+        return self._record(t, u, tl, states, rng, measured=meas if self.sensors else None,
+                            extra=extra)
+
+    def _bank(self, rng: np.random.Generator) -> SensorBank:
+        return SensorBank.from_params(1, self.params.sensors, self.ctrl_dt, rng)
+
+    def _record(self, t: np.ndarray, u: np.ndarray, tl: np.ndarray, states: np.ndarray,
+                rng: np.random.Generator, measured: np.ndarray | None = None,
+                extra: Mapping[str, np.ndarray] | None = None) -> Record:
+        if self.sensors:
+            if measured is None:
+                bank = self._bank(rng)
+                measured = np.empty((t.size, len(CHANNELS)))
+                measured[0] = bank.reset(states[:1])[:, 0]
+                for k in range(1, t.size):
+                    measured[k] = bank.measure(states[k : k + 1])[:, 0]
+            ch = {name: measured[:, j] for j, name in enumerate(CHANNELS)}
+        else:
+            ch = {
+                "motor_angle": states[:, L.TH_M], "output_angle": states[:, L.TH_O],
+                "motor_velocity": states[:, L.W_M], "output_velocity": states[:, L.W_O],
+                "output_torque": states[:, L.TK], "motor_current": states[:, L.CUR],
+            }
+        cols = {"time": t, "current_command": u, "motor_current": ch["motor_current"],
+                "motor_angle": ch["motor_angle"], "motor_velocity": ch["motor_velocity"]}
+        if not self.locked_output:
+            cols["output_angle"] = ch["output_angle"]
+            cols["output_velocity"] = ch["output_velocity"]
+        if self.params.sensors.torque_sensor or not self.sensors:
+            cols["output_torque"] = ch["output_torque"]
+        cols["load_torque"] = tl + self.params.load.torque + self.params.load.gravity * np.sin(
+            states[:, L.TH_O])
+        cols.update(extra or {})
+        meta = {
+            "ratio": repr(self.params.ratio),
+            "configuration": self.params.transmission.grounded,
+            "locked_output": "true" if self.locked_output else "false",
+            "preset": self.params.name,
+            "source": "hdgym simulation" + ("" if self.sensors else " (true states)"),
+        }
+        return Record(columns={k: np.ascontiguousarray(v, dtype=float) for k, v in cols.items()},
+                      meta=meta)
