@@ -111,8 +111,33 @@ def write_report(sections: dict[str, list[dict]], path: Path, command: str) -> N
     atomic_write_text(path, "\n".join(lines) + "\n")
 
 
-def run(quick: bool = False, out: Path = Path("results/bench.md")) -> dict[str, list[dict]]:
-    """Run every benchmark and write the report."""
+def bench_soak(quick: bool = False) -> list[dict]:
+    """One million control periods per preset (100,000 with ``quick``): bounds and memory."""
+    from hdgym.numerics import soak
+    from hdgym.params import preset_names
+
+    rows = []
+    for name in preset_names():
+        r = soak(preset(name), n_steps=100_000 if quick else 1_000_000)
+        f, la = r["first"], r["last"]
+        rows.append({
+            "name": f"soak {name}, {r['steps']:,} steps", "value": r["steps"] / r["seconds"],
+            "unit": "steps/s", "ratio": None, "met": r["finite"] and (
+                la["motor_velocity"] <= 1.5 * f["motor_velocity"] + 1e-9
+                and r["memory_end_mb"] <= r["memory_start_mb"] + 50),
+            "target": "finite, bounded, no memory growth",
+            "note": (f"{name}: |motor speed| max {f['motor_velocity']:.4g} → "
+                     f"{la['motor_velocity']:.4g} rad/s, |torque| max {f['output_torque']:.4g} → "
+                     f"{la['output_torque']:.4g} N m, |torsion| max {f['torsion']:.3g} → "
+                     f"{la['torsion']:.3g} rad (first → last chunk); memory "
+                     f"{r['memory_start_mb']:.0f} → {r['memory_end_mb']:.0f} MiB"),
+        })
+    return rows
+
+
+def run(quick: bool = False, out: Path = Path("results/bench.md"),
+        soak: bool = False) -> dict[str, list[dict]]:
+    """Run every benchmark and write the report (``soak`` adds the long soak runs)."""
     p = preset("tuttle-joint1")
     sections: dict[str, list[dict]] = {}
     rows = bench_physics(p, quick)
@@ -133,5 +158,8 @@ def run(quick: bool = False, out: Path = Path("results/bench.md")) -> dict[str, 
         bench_diagnose = None
     if bench_diagnose is not None:
         sections["Discrepancy workflow"] = bench_diagnose(quick)
-    write_report(sections, out, "hdgym bench" + (" --quick" if quick else ""))
+    if soak:
+        sections["Soak (issue: long runs)"] = bench_soak(quick)
+    write_report(sections, out, "hdgym bench" + (" --quick" if quick else "")
+                 + (" --soak" if soak else ""))
     return sections

@@ -62,12 +62,20 @@ def cmd_params(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from hdgym import bench
 
-    sections = bench.run(quick=args.quick, out=Path(args.out))
+    sections = bench.run(quick=args.quick, out=Path(args.out), soak=args.soak)
     for title, rows in sections.items():
         print(title)
         for r in rows:
             ratio = f"  ratio {r['ratio']:.3g}" if r.get("ratio") is not None else ""
             print(f"  {r['name']}: {r['value']:,.0f} {r.get('unit', '')}{ratio}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_numerics(args: argparse.Namespace) -> int:
+    from hdgym import numerics
+
+    numerics.write_table(Path(args.out), quick=args.quick)
     print(f"wrote {args.out}")
     return 0
 
@@ -160,8 +168,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("bench", help="benchmarks → results/bench.md")
     sp.add_argument("--quick", action="store_true")
+    sp.add_argument("--soak", action="store_true",
+                    help="add a million-step soak run per preset (long; not in CI)")
     sp.add_argument("--out", default="results/bench.md")
     sp.set_defaults(fn=cmd_bench)
+
+    sp = sub.add_parser("numerics", help="substep convergence table → results/numerics.md")
+    sp.add_argument("--quick", action="store_true")
+    sp.add_argument("--out", default="results/numerics.md")
+    sp.set_defaults(fn=cmd_numerics)
 
     sp = sub.add_parser("reproduce", help="reproduce published measurements")
     sp.add_argument("what", choices=["tuttle"])

@@ -53,7 +53,8 @@ def command_signal(spec: str | np.ndarray, time: np.ndarray,
             raise ValueError(f"command: array has {arr.shape} samples, expected {time.shape}")
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:
-            raise ValueError(f"command: sample {bad[0]} is {arr[bad[0]]!r}; commands must be finite")
+            raise ValueError(
+                f"command: sample {bad[0]} is {arr[bad[0]]!r}; commands must be finite")
         return arr.copy()
     kind, _, rest = spec.partition(":")
     if kind not in KINDS:

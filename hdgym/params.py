@@ -68,7 +68,8 @@ class Motor:
     def __post_init__(self) -> None:
         _finite(self, "motor")
         _require(self.inertia > 0, "motor.inertia", "> 0 kg m^2", self.inertia)
-        _require(self.torque_constant > 0, "motor.torque_constant", "> 0 N m/A", self.torque_constant)
+        _require(self.torque_constant > 0, "motor.torque_constant", "> 0 N m/A",
+                 self.torque_constant)
         _require(self.back_emf_constant >= 0, "motor.back_emf_constant", ">= 0 V s/rad",
                  self.back_emf_constant)
         _require(self.resistance > 0, "motor.resistance", "> 0 ohm", self.resistance)

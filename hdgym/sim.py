@@ -141,7 +141,8 @@ class Simulator:
             raise SimulationError(diverged_message(states[1:], bad, self.ctrl_dt))
         return t, u, tl, states
 
-    def run_closed_loop(self, controller: Controller | Callable[[float, Mapping[str, float]], float],
+    def run_closed_loop(self, controller: Controller | Callable[[float, Mapping[str, float]],
+                                                                float],
                         duration: float, *, reference: Callable[[float], float] | None = None,
                         seed: int = 0, load_torque: float | np.ndarray | str | None = None,
                         state: np.ndarray | None = None) -> Record:

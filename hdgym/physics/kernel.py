@@ -28,10 +28,63 @@ import numpy as np
 
 from hdgym.effects import BIT, LOCKED_OUTPUT_BIT
 from hdgym.physics.layout import (
-    BW, CDAMP, CMODEL, CUR, DTH, E_DISS, F_B1, F_B2, F_FC, F_FS, F_NRIP, F_RAMP, F_RFRAME,
-    F_RORD, F_RPH, F_WS, FIN, FOUT, GRAV, HMODEL, HZ, I_MAX, J_M, J_O, K0, K1, K3, KB, KE_AMP,
-    KE_ORD, KE_PH, KNEE, KT, LOAD_T, MU_LOAD, N_STATE, NKE, NSLIP, RATIO, RES, SK2, SK3, SLIP_K,
-    SLIP_W, ST1, ST2, T_LOAD, T_MOTOR, TANH_B, TANH_G, TH_M, TH_O, TK, V_MAX, W_LOAD, W_M, W_MOTOR,
+    BW,
+    CDAMP,
+    CMODEL,
+    CUR,
+    DTH,
+    E_DISS,
+    F_B1,
+    F_B2,
+    F_FC,
+    F_FS,
+    F_NRIP,
+    F_RAMP,
+    F_RFRAME,
+    F_RORD,
+    F_RPH,
+    F_WS,
+    FIN,
+    FOUT,
+    GRAV,
+    HMODEL,
+    HZ,
+    I_MAX,
+    J_M,
+    J_O,
+    K0,
+    K1,
+    K3,
+    KB,
+    KE_AMP,
+    KE_ORD,
+    KE_PH,
+    KNEE,
+    KT,
+    LOAD_T,
+    MU_LOAD,
+    N_STATE,
+    NKE,
+    NSLIP,
+    RATIO,
+    RES,
+    SK2,
+    SK3,
+    SLIP_K,
+    SLIP_W,
+    ST1,
+    ST2,
+    T_LOAD,
+    T_MOTOR,
+    TANH_B,
+    TANH_G,
+    TH_M,
+    TH_O,
+    TK,
+    V_MAX,
+    W_LOAD,
+    W_M,
+    W_MOTOR,
     W_O,
 )
 
@@ -94,7 +147,8 @@ def _friction_level(p: np.ndarray, base: int, w: float, th_in: float, th_out: fl
     if flags & POSDEP:
         for k in range(int(p[base + F_NRIP])):
             ang = th_in if p[base + F_RFRAME + k] == 0.0 else th_out
-            level += p[base + F_RAMP + k] * math.sin(p[base + F_RORD + k] * ang + p[base + F_RPH + k])
+            phase = p[base + F_RORD + k] * ang + p[base + F_RPH + k]
+            level += p[base + F_RAMP + k] * math.sin(phase)
     level += extra
     return level if level > 0.0 else 0.0
 
