@@ -5,8 +5,18 @@ from __future__ import annotations
 import pytest
 
 from hdgym.params import (
-    Amplifier, Compliance, Friction, FrictionSide, Harmonic, Hysteresis, JointParams,
-    KinematicError, Load, Motor, Ripple, Transmission,
+    Amplifier,
+    Compliance,
+    Friction,
+    FrictionSide,
+    Harmonic,
+    Hysteresis,
+    JointParams,
+    KinematicError,
+    Load,
+    Motor,
+    Ripple,
+    Transmission,
 )
 
 
