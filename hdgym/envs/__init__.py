@@ -1,0 +1,53 @@
+"""Gymnasium environments of hdgym.
+
+``import hdgym`` registers:
+
+* ``HarmonicDriveJoint-v0``: output position tracking
+  (:class:`~hdgym.envs.joint.HarmonicDriveJointEnv`);
+* ``HarmonicDriveResonance-v0``: run-up through the resonance trap
+  (:class:`~hdgym.envs.resonance.HarmonicDriveResonanceEnv`);
+
+each with a native vector env (:mod:`hdgym.envs.vector`) for
+``gym.make_vec(..., vectorization_mode="vector_entry_point")``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: registered ids -> (entry point, vector entry point)
+ENV_IDS: dict[str, tuple[str, str]] = {
+    "HarmonicDriveJoint-v0": ("hdgym.envs.joint:HarmonicDriveJointEnv",
+                              "hdgym.envs.vector:make_joint_vector"),
+    "HarmonicDriveResonance-v0": ("hdgym.envs.resonance:HarmonicDriveResonanceEnv",
+                                  "hdgym.envs.vector:make_resonance_vector"),
+}
+MAX_EPISODE_STEPS = 2000
+
+
+def register_envs() -> None:
+    """Register the hdgym ids with Gymnasium (safe to call more than once)."""
+    import gymnasium as gym
+
+    for env_id, (entry, vector_entry) in ENV_IDS.items():
+        if env_id in gym.registry:
+            continue
+        gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
+                     max_episode_steps=MAX_EPISODE_STEPS)
+
+
+def __getattr__(name: str) -> Any:  # lazy: importing hdgym stays light
+    if name == "HarmonicDriveJointEnv":
+        from hdgym.envs.joint import HarmonicDriveJointEnv
+        return HarmonicDriveJointEnv
+    if name == "HarmonicDriveResonanceEnv":
+        from hdgym.envs.resonance import HarmonicDriveResonanceEnv
+        return HarmonicDriveResonanceEnv
+    if name == "HarmonicDriveVectorEnv":
+        from hdgym.envs.vector import HarmonicDriveVectorEnv
+        return HarmonicDriveVectorEnv
+    raise AttributeError(f"module 'hdgym.envs' has no attribute {name!r}")
+
+
+__all__ = ["ENV_IDS", "HarmonicDriveJointEnv", "HarmonicDriveResonanceEnv",
+           "HarmonicDriveVectorEnv", "MAX_EPISODE_STEPS", "register_envs"]

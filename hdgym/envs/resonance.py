@@ -1,0 +1,102 @@
+"""``HarmonicDriveResonance-v0``: run a joint up through its resonance trap."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from hdgym.envs.common import HarmonicDriveEnv
+from hdgym.envs.tasks import ResonanceTask
+from hdgym.params import JointParams
+
+
+class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
+    """Bring the motor from rest to a target speed above a resonance trap.
+
+    When an excitation order of the WG frequency (kinematic error, twice per
+    turn) meets the joint's torsional natural frequency, the flexspline
+    torque oscillates, load-dependent tooth friction drains the motor's
+    power and the mean speed stays on a plateau (PHYSICS.md §3). On Tuttle's
+    joint 1 (the default preset) the 2x-order trap sits near 8,000 deg/s of
+    input speed; the target is drawn in 10,000-12,000 deg/s, so a naive
+    full-current command, limited by the amplifier's current clip and
+    back-EMF voltage limit, can stay trapped. The agent must find a way
+    through (e.g. timing the run-up, managing the oscillation).
+
+    ## Action space
+
+    ``Box(-1, 1, (1,), float32)``: current command / ``I_max``. Values
+    outside [-1, 1] saturate like the amplifier's input clip; NaN or
+    infinite actions raise ``ValueError``. Current and back-EMF limits and
+    the current loop act inside the physics.
+
+    ## Observation space
+
+    ``Box(-10, 10, (10,), float32)``, measured and normalized, clipped:
+
+    | # | observation | scale |
+    |---|---|---|
+    | 0 | motor velocity from encoder counts | / target speed |
+    | 1 | output velocity from counts x ratio | / target speed |
+    | 2, 3 | cos, sin of the motor (WG) encoder angle | 1 |
+    | 4 | torque sensor (flexspline torque) | / ``K_t I_max ratio`` |
+    | 5 | measured motor current | / ``I_max`` |
+    | 6 | target speed | / no-load speed ``V/K_b`` |
+    | 7 | torque sensor minus its running mean (oscillation) | / ``K_t I_max ratio`` |
+    | 8 | previous action (clipped) | 1 |
+    | 9 | time | / ``horizon`` |
+
+    ``info`` holds the true states (``motor_angle``, ``motor_velocity``,
+    ``output_angle``, ``output_velocity``, ``motor_current``,
+    ``output_torque``), ``time``, ``target_speed`` (rad/s),
+    ``torque_oscillation`` (N m, true) and ``diverged``.
+
+    ## Reward
+
+    ``1 - min(|w_target - w_motor| / w_target, 2)
+    - oscillation_weight * min(((T_k - mean T_k) / (K_t I_max ratio))^2, 4)``
+    (true motor speed and flexspline torque; the mean is a first-order
+    running mean with ``torque_time_constant``): 0 at rest, 1 at the target
+    without vibration; minus ``safety_penalty`` on a safety termination.
+
+    ## Starting state
+
+    At rest, spring relaxed, WG angle uniform in [0, 2 pi) (friction and
+    kinematic error vary with it, which makes the trap's exit erratic);
+    target speed uniform in ``target_speed``.
+
+    ## Episode end
+
+    * Truncation at 2000 steps (2 s at 1 ms).
+    * Termination: ``|flexspline torque| > torque_limit`` (default
+      3 ``K_t I_max ratio``), ``|motor speed| > speed_limit`` (default
+      1.5 ``V/K_b``) or a diverging simulation.
+
+    ## Arguments
+
+    ``preset``, ``without``, ``ctrl_dt``, ``n_substeps``, ``sensors``,
+    ``randomize``, ``horizon``, ``torque_limit``, ``speed_limit``,
+    ``safety_penalty``, ``load_torque``, ``render_mode`` as in
+    :class:`~hdgym.envs.joint.HarmonicDriveJointEnv`, and
+
+    * ``target_speed``: motor speed, rad/s, a number or ``(low, high)``
+      (default ``(radians(10000), radians(12000))``);
+    * ``oscillation_weight`` (1.0), ``torque_time_constant`` (0.05 s).
+    """
+
+    def __init__(self, preset: str | JointParams | None = None, without: Iterable[str] = (),
+                 ctrl_dt: float | None = None, n_substeps: int | None = None,
+                 sensors: Mapping[str, Any] | None = None,
+                 randomize: Mapping[str, float] | None = None,
+                 target_speed: float | tuple[float, float] = (
+                     math.radians(10_000.0), math.radians(12_000.0)),
+                 oscillation_weight: float = 1.0, torque_time_constant: float = 0.05,
+                 horizon: float = 2.0, torque_limit: float | None = None,
+                 speed_limit: float | None = None, safety_penalty: float = 100.0,
+                 load_torque: float = 0.0, render_mode: str | None = None) -> None:
+        task = ResonanceTask(target_speed, oscillation_weight, torque_time_constant)
+        super().__init__(task, render_mode, preset=preset, without=without, ctrl_dt=ctrl_dt,
+                         n_substeps=n_substeps, sensors=sensors, randomize=randomize,
+                         horizon=horizon, torque_limit=torque_limit, speed_limit=speed_limit,
+                         safety_penalty=safety_penalty, load_torque=load_torque)

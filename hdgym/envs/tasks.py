@@ -1,0 +1,331 @@
+"""Tasks: what an environment asks of the joint (references, rewards, observations).
+
+A task turns the joint's measurements into a normalized observation, and the
+true state into a reward and a safety termination. Its per-step part is one
+compiled function over a whole batch, so a single env (a batch of one) and
+the native vector env run the *same* code and give bit-identical results.
+
+Two tasks:
+
+* :class:`TrackingTask` (``HarmonicDriveJoint-v0``): follow an output
+  position reference (steps, sines, slow constant speed, point-to-point).
+* :class:`ResonanceTask` (``HarmonicDriveResonance-v0``): accelerate the
+  motor to a target speed above the 2x-order resonance trap (PHYSICS.md §3)
+  with little flexspline torque oscillation.
+
+Per-episode draws (reference shape, target speed) come from each env's own
+``numpy.random.Generator``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numba as nb
+import numpy as np
+
+from hdgym.physics.layout import CUR, TH_O, TK, W_M
+
+#: every observation is clipped to [-OBS_BOUND, OBS_BOUND] (and NaN -> 0)
+OBS_BOUND = 10.0
+
+# indices into the constants row ``c`` shared by both post functions
+C_RATIO = 0  # nominal ratio
+C_IMAX = 1  # nominal current limit, A
+C_TNOM = 2  # torque scale, output N m
+C_WNOM = 3  # motor speed scale, rad/s
+C_TLIM = 4  # safety: |flexspline torque| above this ends the episode, N m
+C_WLIM = 5  # safety: |motor speed| above this ends the episode, rad/s
+C_PEN = 6  # penalty on a safety termination
+C_SDT = 7  # torque-sensor noise sd, N m
+C_SDI = 8  # current noise sd, A
+C_HOR = 9  # task horizon, s
+C_TASK = 10  # first task-specific constant
+N_COMMON = C_TASK
+
+
+@nb.njit(cache=True, inline="always")
+def _box(v: float) -> float:
+    """Finite and inside the observation box (NaN -> 0, +-inf -> bound)."""
+    if v != v:
+        return 0.0
+    if v > OBS_BOUND:
+        return OBS_BOUND
+    if v < -OBS_BOUND:
+        return -OBS_BOUND
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def _unsafe(x: np.ndarray, bad: bool, c: np.ndarray) -> bool:
+    return bad or not (abs(x[TK]) <= c[C_TLIM]) or not (abs(x[W_M]) <= c[C_WLIM])
+
+
+# ---------------------------------------------------------------- tracking
+
+REFERENCES: tuple[str, ...] = ("step", "sine", "constant_speed", "point_to_point")
+
+# task constants after the common ones
+J_REF = C_TASK  # reference scale, output rad
+J_ERR = C_TASK + 1  # error scale, output rad
+J_WCUR = C_TASK + 2  # weight of the current cost
+N_JOINT_CONST = C_TASK + 3
+# task parameter row: kind, theta0, a, b, c, d
+N_JOINT_PARAMS = 6
+
+
+@nb.njit(cache=True)
+def reference(t: float, p: np.ndarray) -> tuple[float, float]:
+    """Output reference (rad) and its rate (rad/s) at ``t`` for parameter row ``p``."""
+    kind = p[0]
+    th0 = p[1]
+    if kind == 0.0:  # staircase: 0, a, b, c over four segments of d s
+        k = int(t / p[5])
+        if k <= 0:
+            return th0, 0.0
+        return th0 + p[1 + min(k, 3)], 0.0
+    if kind == 1.0:  # sine a sin(b t)
+        return th0 + p[2] * math.sin(p[3] * t), p[2] * p[3] * math.cos(p[3] * t)
+    if kind == 2.0:  # constant speed a from time b
+        if t <= p[3]:
+            return th0, 0.0
+        return th0 + p[2] * (t - p[3]), p[2]
+    # point-to-point minimum-jerk move of a rad starting at b, lasting c s
+    s = (t - p[3]) / p[4]
+    if s <= 0.0:
+        return th0, 0.0
+    if s >= 1.0:
+        return th0 + p[2], 0.0
+    s3 = s * s * s
+    return (th0 + p[2] * s3 * (10.0 - 15.0 * s + 6.0 * s * s),
+            p[2] * 30.0 * s * s * (1.0 - s) * (1.0 - s) / p[4])
+
+
+@nb.njit(cache=True)
+def post_tracking(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+                  act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
+                  fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
+                  rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of the tracking task (batch)."""
+    ratio = c[C_RATIO]
+    rs = c[J_REF]
+    ws = c[C_WNOM]
+    wo = ws / ratio
+    for i in range(xs.shape[0]):
+        x = xs[i]
+        t = steps[i] * dt
+        r, rd = reference(t, tp[i])
+        th_m = meas[0, i]
+        th_o = meas[1, i]
+        o = obs[i]
+        o[0] = _box(th_o / rs)
+        o[1] = _box(th_m / ratio / rs)
+        o[2] = _box(math.cos(th_m))
+        o[3] = _box(math.sin(th_m))
+        o[4] = _box(meas[2, i] / ws)
+        o[5] = _box(meas[3, i] / wo)
+        o[6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
+        o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
+        o[8] = _box(r / rs)
+        o[9] = _box(rd / wo)
+        o[10] = _box((r - th_o) / c[J_ERR])
+        o[11] = _box(act[i])
+        e = r - x[TH_O]
+        cur = x[CUR] / c[C_IMAX]
+        reward = 1.0 / (1.0 + abs(e) / c[J_ERR]) - c[J_WCUR] * min(cur * cur, 4.0)
+        done = _unsafe(x, bad[i], c)
+        if done:
+            reward -= c[C_PEN]
+        if not math.isfinite(reward):
+            reward = -c[C_PEN]
+        if fresh[i]:
+            reward = 0.0
+            done = False
+        rew[i] = reward
+        term[i] = done
+        aux[i, 0] = r
+        aux[i, 1] = e if math.isfinite(e) else 0.0
+
+
+class TrackingTask:
+    """Output position tracking (``HarmonicDriveJoint-v0``).
+
+    Args:
+        reference: ``"mixed"`` (one of all kinds, drawn per episode), one of
+            :data:`REFERENCES`, or a sequence of them to draw from.
+        reference_scale: output rad; references stay within about
+            +-0.6 of it, and angles are observed divided by it.
+        error_scale: output rad; the tracking reward is
+            ``1 / (1 + |e| / error_scale)`` and the error channel is
+            ``e / error_scale`` (clipped at +-10).
+        current_weight: weight of ``(i / I_max)^2`` in the reward.
+        max_speed: output rad/s, cap on the sine's peak speed.
+    """
+
+    name = "tracking"
+    obs_names: tuple[str, ...] = (
+        "output_angle", "motor_angle_output_referred", "cos_motor_angle", "sin_motor_angle",
+        "motor_velocity", "output_velocity", "output_torque", "motor_current", "reference",
+        "reference_velocity", "tracking_error", "previous_action",
+    )
+    aux_names = ("reference", "tracking_error")
+    n_params = N_JOINT_PARAMS
+    n_state = 1
+    post = staticmethod(post_tracking)
+
+    def __init__(self, reference: str | Sequence[str] = "mixed", reference_scale: float = 0.5,
+                 error_scale: float = 1e-3, current_weight: float = 0.05,
+                 max_speed: float = 1.5) -> None:
+        kinds = REFERENCES if reference == "mixed" else (
+            (reference,) if isinstance(reference, str) else tuple(reference))
+        for k in kinds:
+            if k not in REFERENCES:
+                raise ValueError(f"reference: unknown reference {k!r}; known references are "
+                                 f"mixed, {', '.join(REFERENCES)}")
+        if not kinds:
+            raise ValueError("reference: give at least one reference kind")
+        for name, v in (("reference_scale", reference_scale), ("error_scale", error_scale),
+                        ("max_speed", max_speed)):
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"{name} must be > 0, got {v!r}")
+        if not (current_weight >= 0 and math.isfinite(current_weight)):
+            raise ValueError(f"current_weight must be >= 0, got {current_weight!r}")
+        self.kinds = tuple(REFERENCES.index(k) for k in kinds)
+        self.reference_scale = float(reference_scale)
+        self.error_scale = float(error_scale)
+        self.current_weight = float(current_weight)
+        self.max_speed = float(max_speed)
+
+    def constants(self) -> list[float]:
+        return [self.reference_scale, self.error_scale, self.current_weight]
+
+    def draw(self, rng: np.random.Generator, theta0: float, horizon: float) -> np.ndarray:
+        """One episode's reference parameters, starting from output angle ``theta0``."""
+        p = np.zeros(N_JOINT_PARAMS)
+        kind = self.kinds[int(rng.integers(len(self.kinds)))] if len(self.kinds) > 1 \
+            else self.kinds[0]
+        a = 0.6 * self.reference_scale
+        sign = 1.0 if rng.random() < 0.5 else -1.0
+        p[0] = kind
+        p[1] = theta0
+        if kind == 0:  # staircase
+            p[2:5] = rng.uniform(-a, a, 3)
+            p[5] = horizon / 4.0
+        elif kind == 1:  # sine
+            amp = rng.uniform(0.05 * a, a)
+            w = 2.0 * math.pi * rng.uniform(0.2, 2.0)
+            p[2] = sign * amp
+            p[3] = min(w, self.max_speed / amp)
+        elif kind == 2:  # slow constant speed: kinematic error dominates the error
+            p[2] = sign * rng.uniform(0.005, 0.05)
+            p[3] = rng.uniform(0.0, 0.1 * horizon)
+        else:  # point-to-point
+            p[2] = sign * rng.uniform(0.1 * a, a)
+            p[3] = rng.uniform(0.025, 0.25) * horizon
+            p[4] = rng.uniform(0.15, 0.5) * horizon
+        return p
+
+
+# ---------------------------------------------------------------- resonance
+
+R_WOSC = C_TASK  # weight of the torque-oscillation cost
+R_TAU = C_TASK + 1  # time constant of the torque mean, s
+N_RES_CONST = C_TASK + 2
+
+
+@nb.njit(cache=True)
+def post_resonance(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+                   act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
+                   fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
+                   rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of the resonance task (batch).
+
+    ``ts[:, 0]`` and ``ts[:, 1]`` hold the running means (first-order,
+    time constant ``c[R_TAU]``) of the true and measured flexspline torque;
+    the oscillation is the torque minus its mean.
+    """
+    beta = dt / (c[R_TAU] + dt)
+    tn = c[C_TNOM]
+    for i in range(xs.shape[0]):
+        x = xs[i]
+        wt = tp[i, 0]
+        t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
+        t_true = x[TK]
+        if fresh[i] or not math.isfinite(ts[i, 0]):
+            ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
+            ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
+        else:
+            ts[i, 0] += beta * (t_true - ts[i, 0])
+            ts[i, 1] += beta * (t_meas - ts[i, 1])
+        th_m = meas[0, i]
+        o = obs[i]
+        o[0] = _box(meas[2, i] / wt)
+        o[1] = _box(meas[3, i] * c[C_RATIO] / wt)
+        o[2] = _box(math.cos(th_m))
+        o[3] = _box(math.sin(th_m))
+        o[4] = _box(t_meas / tn)
+        o[5] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
+        o[6] = _box(wt / c[C_WNOM])
+        o[7] = _box((t_meas - ts[i, 1]) / tn)
+        o[8] = _box(act[i])
+        o[9] = _box(steps[i] * dt / c[C_HOR])
+        speed_err = min(abs(wt - x[W_M]) / wt, 2.0)
+        osc = (t_true - ts[i, 0]) / tn
+        reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
+        done = _unsafe(x, bad[i], c)
+        if done:
+            reward -= c[C_PEN]
+        if not math.isfinite(reward):
+            reward = -c[C_PEN]
+        if fresh[i]:
+            reward = 0.0
+            done = False
+        rew[i] = reward
+        term[i] = done
+        aux[i, 0] = wt
+        aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
+
+
+class ResonanceTask:
+    """Run the motor up to a target speed above the resonance trap.
+
+    Args:
+        target_speed: motor (WG) speed, rad/s: a number, or ``(low, high)``
+            to draw uniformly per episode. Default 10,000-12,000 deg/s.
+        oscillation_weight: weight of ``((T_k - mean T_k) / T_nom)^2``.
+        torque_time_constant: s, the running mean that defines the oscillation.
+    """
+
+    name = "resonance"
+    obs_names: tuple[str, ...] = (
+        "motor_velocity", "output_velocity", "cos_motor_angle", "sin_motor_angle",
+        "output_torque", "motor_current", "target_speed", "torque_oscillation",
+        "previous_action", "time",
+    )
+    aux_names = ("target_speed", "torque_oscillation")
+    n_params = 1
+    n_state = 2
+    post = staticmethod(post_resonance)
+
+    def __init__(self, target_speed: float | tuple[float, float] = (
+            math.radians(10_000.0), math.radians(12_000.0)),
+                 oscillation_weight: float = 1.0, torque_time_constant: float = 0.05) -> None:
+        lo, hi = (target_speed, target_speed) if np.isscalar(target_speed) else target_speed
+        if not (0 < lo <= hi and math.isfinite(hi)):
+            raise ValueError(f"target_speed must be > 0 rad/s (or 0 < low <= high), "
+                             f"got {target_speed!r}")
+        if not (oscillation_weight >= 0 and math.isfinite(oscillation_weight)):
+            raise ValueError(f"oscillation_weight must be >= 0, got {oscillation_weight!r}")
+        if not (torque_time_constant > 0 and math.isfinite(torque_time_constant)):
+            raise ValueError(f"torque_time_constant must be > 0 s, got {torque_time_constant!r}")
+        self.target = (float(lo), float(hi))
+        self.oscillation_weight = float(oscillation_weight)
+        self.torque_time_constant = float(torque_time_constant)
+
+    def constants(self) -> list[float]:
+        return [self.oscillation_weight, self.torque_time_constant]
+
+    def draw(self, rng: np.random.Generator, theta0: float, horizon: float) -> np.ndarray:
+        lo, hi = self.target
+        return np.array([rng.uniform(lo, hi) if hi > lo else lo])

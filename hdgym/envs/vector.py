@@ -1,0 +1,171 @@
+"""Native vector env: ``n`` joints in one batch on the compiled physics.
+
+``gym.make_vec("HarmonicDriveJoint-v0", num_envs=n,
+vectorization_mode="vector_entry_point")`` returns a
+:class:`HarmonicDriveVectorEnv`. Every env carries its own parameter row
+(randomized per episode when ``randomize`` is given). Batches of 64 envs
+and more step on all cores (``kernel.step_parallel``), smaller ones on one
+(``kernel.step_serial``); the results are the same.
+
+Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
+be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
+a single env reset with ``seed=s + i`` and given the same actions.
+Autoreset is ``NEXT_STEP`` (Gymnasium's default): the step after an env
+ends returns the first observation of its next episode, reward 0, and
+ignores that env's action.
+
+Actions ``(n, 1)`` (or ``(n,)``) in [-1, 1]; values beyond saturate like
+the amplifier, NaN or inf raise ``ValueError``. Observations, rewards and
+episode ends are those of the single env (see
+:class:`~hdgym.envs.joint.HarmonicDriveJointEnv` and
+:class:`~hdgym.envs.resonance.HarmonicDriveResonanceEnv`); ``info`` holds
+the same keys as arrays of ``n`` with ``_key`` masks.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from hdgym.envs.common import INFO_STATES, JointBatch, action_space, observation_space
+from hdgym.envs.tasks import ResonanceTask, TrackingTask
+from hdgym.hardware import action_to_current
+from hdgym.physics import kernel
+from hdgym.physics import layout as L
+
+
+class HarmonicDriveVectorEnv(VectorEnv):
+    """``num_envs`` harmonic-drive joints with one task, stepped as one batch.
+
+    Args:
+        task: a :class:`~hdgym.envs.tasks.TrackingTask` or
+            :class:`~hdgym.envs.tasks.ResonanceTask`.
+        num_envs: batch size.
+        max_episode_steps: truncation (the registration's 2000 by default).
+        render_mode: ``"rgb_array"`` renders env 0.
+        parallel: force the threaded (True) or serial (False) kernel;
+            None picks by batch size.
+        **kwargs: the single env's physics/hardware arguments (``preset``,
+            ``without``, ``ctrl_dt``, ``n_substeps``, ``sensors``,
+            ``randomize``, ``horizon``, ``torque_limit``, ``speed_limit``,
+            ``safety_penalty``, ``load_torque``).
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array"], "render_fps": 50,
+                                "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, task: Any, num_envs: int = 1, max_episode_steps: int | None = 2000,
+                 render_mode: str | None = None, parallel: bool | None = None,
+                 **kwargs: Any) -> None:
+        if int(num_envs) != num_envs or num_envs < 1:
+            raise ValueError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
+                             f"None, got {render_mode!r}")
+        self.num_envs = int(num_envs)
+        self.batch = JointBatch(task, self.num_envs, **kwargs)
+        if parallel is not None:
+            self.batch.kernel_step = kernel.step_parallel if parallel else kernel.step_serial
+        self.task = task
+        self.params = self.batch.params
+        self.max_episode_steps = max_episode_steps
+        self.render_mode = render_mode
+        self.single_observation_space = observation_space(task)
+        self.single_action_space = action_space()
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
+        self._seeded = False
+        self._mask = np.ones(self.num_envs, dtype=np.bool_)
+        self._mask.flags.writeable = False
+
+    def _info(self) -> dict[str, Any]:
+        b = self.batch
+        s = b.true_states()
+        info: dict[str, Any] = {}
+        for k, name in enumerate(INFO_STATES):
+            info[name] = s[:, k].copy()
+        info["time"] = b.steps * b.ctrl_dt
+        info[self.task.aux_names[0]] = b.aux[:, 0].copy()
+        info[self.task.aux_names[1]] = b.aux[:, 1].copy()
+        info["diverged"] = b.bad.copy()
+        for name in list(info):
+            info["_" + name] = self._mask
+        return info
+
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every env. ``seed`` int: env ``i`` gets ``seed + i``; or a list of seeds."""
+        n = self.num_envs
+        if isinstance(seed, (list, tuple)):
+            if len(seed) != n:
+                raise ValueError(f"seed list must have {n} entries, got {len(seed)}")
+            seeds = list(seed)
+        elif seed is not None:
+            seeds = [int(seed) + i for i in range(n)]
+            super().reset(seed=int(seed))
+        else:
+            seeds = None
+        if seeds is not None:
+            self.batch.set_rngs([seeding.np_random(s)[0] for s in seeds], reseeded=True)
+            self._seeded = True
+        elif not self._seeded:
+            self.batch.set_rngs([seeding.np_random(None)[0] for _ in range(n)], reseeded=True)
+            self._seeded = True
+        self.batch.reset_all()
+        self.prev_done[:] = False
+        return self.batch.obs.copy(), self._info()
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        b = self.batch
+        a = np.asarray(actions, dtype=float)
+        if a.size != self.num_envs:
+            raise ValueError(f"actions must have shape ({self.num_envs}, 1), got {a.shape}")
+        a = a.reshape(self.num_envs)
+        b.i_cmd[:] = action_to_current(a, b.rows[:, L.I_MAX])  # raises on NaN/inf
+        np.clip(a, -1.0, 1.0, out=b.act)
+        done = self.prev_done
+        b.advance(done if done.any() else None)
+        term = b.term.copy()
+        if self.max_episode_steps is not None:
+            trunc = b.steps >= self.max_episode_steps
+        else:
+            trunc = np.zeros(self.num_envs, dtype=np.bool_)
+        self.prev_done = term | trunc
+        return b.obs.copy(), b.rew.copy(), term, trunc, self._info()
+
+    def render(self) -> np.ndarray | None:
+        """A frame of env 0 (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        from hdgym.envs.render import render_frame
+
+        b = self.batch
+        return render_frame(b.true_states()[0], b.aux[0], self.task.name,
+                            float(b.steps[0] * b.ctrl_dt), b.torque_scale, b.current_limit,
+                            b.speed_scale)
+
+
+_JOINT_TASK = ("reference", "reference_scale", "error_scale", "current_weight")
+_RES_TASK = ("target_speed", "oscillation_weight", "torque_time_constant")
+
+
+def _split(kwargs: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
+    return {k: kwargs.pop(k) for k in names if k in kwargs}
+
+
+def make_joint_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEnv:
+    """Vector entry point of ``HarmonicDriveJoint-v0``."""
+    task = TrackingTask(**_split(kwargs, _JOINT_TASK))
+    return HarmonicDriveVectorEnv(task, num_envs, **kwargs)
+
+
+def make_resonance_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEnv:
+    """Vector entry point of ``HarmonicDriveResonance-v0``."""
+    task = ResonanceTask(**_split(kwargs, _RES_TASK))
+    return HarmonicDriveVectorEnv(task, num_envs, **kwargs)
