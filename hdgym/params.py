@@ -566,7 +566,7 @@ def _build(cls: type, data: Mapping[str, Any], where: str) -> Any:
         kwargs[key] = value
     try:
         return cls(**kwargs)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None
 
 
@@ -591,10 +591,14 @@ def from_dict(data: Mapping[str, Any], where: str = "params") -> JointParams:
             for side in ("input", "output"):
                 if side in section:
                     s = dict(section[side])
-                    s["ripple"] = tuple(Ripple(**r) for r in s.get("ripple", ()))
-                    section[side] = FrictionSide(**s)
+                    s["ripple"] = tuple(_build(Ripple, r, f"{where} [[friction.{side}.ripple]]")
+                                        for r in s.get("ripple", ()))
+                    section[side] = _build(FrictionSide, s, f"{where} [friction.{side}]")
         if key == "kinematic_error":
-            section = {"harmonics": tuple(Harmonic(**h) for h in section.get("harmonics", ()))}
+            section = dict(section)
+            section["harmonics"] = tuple(
+                _build(Harmonic, h, f"{where} [[kinematic_error.harmonics]]")
+                for h in section.get("harmonics", ()))
         parts[key] = _build(cls, section, f"{where} [{key}]")
     return JointParams(**parts, effects=tuple(effects), name=meta.get("name", "custom"),
                        description=meta.get("description", ""), sources=dict(sources))
