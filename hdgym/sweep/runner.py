@@ -1,0 +1,119 @@
+"""``run_sweep``: validate a spec, skip finished jobs, run the rest, summarize."""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from hdgym.params import atomic_write_text
+from hdgym.sweep.backends import BACKENDS, FIXED_COLUMNS, iter_results, param_columns
+from hdgym.sweep.spec import SweepSpec, load_spec
+from hdgym.sweep.store import ResultsStore
+
+__all__ = ["SweepResult", "run_sweep"]
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """What a call to :func:`run_sweep` did."""
+
+    out_dir: Path
+    total: int  # jobs in the spec
+    skipped: int  # already in results.csv
+    ran: int  # run now
+    errors: int  # of those, with status "error"
+    seconds: float
+    summary: Path | None
+
+
+def _copy_spec(spec: SweepSpec, out_dir: Path) -> None:
+    """``DIR/spec.toml``; a different earlier spec is kept as ``spec.N.toml``."""
+    dest = out_dir / "spec.toml"
+    if dest.exists():
+        old = dest.read_text()
+        if old == spec.text:
+            return
+        k = 1
+        while (out_dir / f"spec.{k}.toml").exists():
+            k += 1
+        atomic_write_text(out_dir / f"spec.{k}.toml", old)
+    atomic_write_text(dest, spec.text)
+
+
+def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local",
+              address: str | None = None, workers: int | None = None, *,
+              quick: bool | None = None, summarize: bool = True,
+              progress: bool = True) -> SweepResult:
+    """Run the sweep ``spec_path`` into ``out_dir`` (resuming if it has results).
+
+    Args:
+        spec_path: the spec TOML (see :mod:`hdgym.sweep.spec`).
+        out_dir: gets ``results.csv`` (one row per job), ``spec.toml`` and the
+            summary (``summary.md``, ``summary.png``; also
+            ``<summary_dir>/<name>.md/.png`` when the spec sets ``summary_dir``).
+        backend: ``"local"`` (process pool) or ``"ray"``.
+        address: Ray cluster address (``None``: start Ray locally).
+        workers: processes (local; default ``os.cpu_count()``) or CPUs for a
+            local Ray; 1 runs jobs in this process.
+        quick: override the spec's ``quick`` key (shorter runs).
+        summarize: write the summary at the end.
+        progress: show a progress bar and a closing line.
+
+    Raises:
+        ValueError: a bad spec (naming file and line) or bad arguments, before
+            any job runs.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; known: {', '.join(BACKENDS)}")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if address is not None and backend != "ray":
+        raise ValueError("--address is for --backend ray")
+    spec = load_spec(spec_path, quick=quick)
+    jobs = spec.jobs()
+    ids = [j.job_id for j in jobs]
+    if len(set(ids)) != len(ids):  # pragma: no cover - the spec forbids duplicates
+        raise ValueError(f"{spec.path}: two jobs have the same inputs")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _copy_spec(spec, out_dir)
+
+    columns = list(FIXED_COLUMNS) + (param_columns(jobs[0]) if jobs else [])
+    t0 = time.perf_counter()
+    ran = errors = 0
+    with ResultsStore(out_dir / "results.csv", columns) as store:
+        todo = [j for j in jobs if j.job_id not in store.done]
+        skipped = len(jobs) - len(todo)
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(jobs), initial=skipped, desc=f"sweep {spec.name}", unit="job",
+                       file=sys.stderr, dynamic_ncols=True)
+        try:
+            for row in iter_results(todo, backend, address=address, workers=workers):
+                store.append(row)
+                ran += 1
+                if row["status"] != "ok":
+                    errors += 1
+                if bar is not None:
+                    bar.update(1)
+                    if errors:
+                        bar.set_postfix(errors=errors)
+        finally:
+            if bar is not None:
+                bar.close()
+    seconds = time.perf_counter() - t0
+    summary = None
+    if summarize:
+        from hdgym.sweep.summary import summarize as _summarize
+
+        summary = _summarize(out_dir, command=f"hdgym sweep {spec_path} --out {out_dir}"
+                             + (" --backend ray" if backend == "ray" else ""))
+    if progress:
+        print(f"sweep {spec.name}: {len(jobs)} jobs, {skipped} already done, {ran} run "
+              f"({errors} errors) in {seconds:.1f} s on {backend}; "
+              f"wrote {out_dir / 'results.csv'}" + (f", {summary}" if summary else ""))
+    return SweepResult(out_dir, len(jobs), skipped, ran, errors, seconds, summary)

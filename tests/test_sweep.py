@@ -1,0 +1,300 @@
+"""Sweeps: spec validation with file:line errors, resumable results, local and Ray backends."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import make_joint
+
+from hdgym import params as P
+from hdgym.sweep import load_spec, run_sweep, spec_names, spec_path
+from hdgym.sweep.backends import run_job
+from hdgym.sweep.scenarios import register, scenario_names
+from hdgym.sweep.spec import draw_params, find_line, parse_spec
+from hdgym.sweep.store import ResultsStore, read_rows
+
+SPEC = """\
+# a small sweep: 2 drives x 2 grid points x 2 scenarios x 2 seeds = 16 jobs
+[sweep]
+name = "tiny"
+presets = ["tuttle-joint1", "drive.toml"]
+scenarios = ["current_steps", "locked_random"]
+seeds = [0, 3]
+quick = true
+
+[spreads]
+"compliance.stiffness" = 0.3
+"friction.output" = 0.3
+
+[grid]
+"load.inertia" = [1.0, 1.5]
+
+[scenario.current_steps]
+fractions = [0.3]
+quick_duration = 0.2
+
+[scenario.locked_random]
+quick_duration = 0.2
+"""
+
+
+@pytest.fixture
+def spec_file(tmp_path: Path) -> Path:
+    P.save(make_joint(), tmp_path / "drive.toml")
+    f = tmp_path / "sweep.toml"
+    f.write_text(SPEC)
+    return f
+
+
+def _rows(out: Path) -> dict[str, dict[str, str]]:
+    header, rows = read_rows(out / "results.csv")
+    assert len({r["job_id"] for r in rows}) == len(rows), "a job was written twice"
+    return {r["job_id"]: {k: v for k, v in r.items() if k != "elapsed_s"} for r in rows}
+
+
+# ----------------------------------------------------------------- the spec
+
+
+def test_spec_expands_to_jobs_with_stable_ids(spec_file: Path) -> None:
+    spec = load_spec(spec_file)
+    jobs = spec.jobs()
+    assert len(jobs) == 2 * 2 * 2 * 2
+    ids = [j.job_id for j in jobs]
+    assert len(set(ids)) == len(ids)
+    assert ids == [j.job_id for j in load_spec(spec_file).jobs()]
+    # the id is a hash of the inputs only: a new seed list keeps the old jobs' ids
+    more = spec_file.with_name("more.toml")
+    more.write_text(SPEC.replace("seeds = [0, 3]", "seeds = [0, 3, 5]"))
+    assert set(ids) < {j.job_id for j in load_spec(more).jobs()}
+    # quick from the caller overrides the spec and changes the ids
+    assert not set(ids) & {j.job_id for j in load_spec(spec_file, quick=False).jobs()}
+
+
+def test_randomized_drive_from_seed_and_inputs_only(spec_file: Path) -> None:
+    jobs = load_spec(spec_file).jobs()
+    j = jobs[0]
+    base = j.base_params()
+    p1, d1 = draw_params(base, j.grid, j.spreads, j.drive_rng())
+    p2, d2 = draw_params(base, j.grid, j.spreads, j.drive_rng())
+    assert p1 == p2 and d1 == d2
+    k = base.compliance.stiffness
+    assert 0.7 * k <= p1.compliance.stiffness <= 1.3 * k
+    # a friction side scales as a whole: breakaway/coulomb ratio kept
+    f0, f1 = base.friction.output, p1.friction.output
+    factor = d1["friction.output"]
+    assert 0.7 <= factor <= 1.3
+    assert f1.coulomb == pytest.approx(f0.coulomb * factor)
+    assert f1.breakaway == pytest.approx(f0.breakaway * factor)
+    assert f1.stribeck_velocity == f0.stribeck_velocity
+    # another scenario of the same drive and seed meets the same drive
+    same = [o for o in jobs if o.preset == j.preset and o.seed == j.seed and o.grid == j.grid]
+    assert len({draw_params(base, o.grid, o.spreads, o.drive_rng())[0] for o in same}) == 1
+    other = next(o for o in jobs if o.preset == j.preset and o.seed != j.seed)
+    assert draw_params(base, other.grid, other.spreads, other.drive_rng())[0] != p1
+
+
+def test_run_job_is_deterministic(spec_file: Path) -> None:
+    job = load_spec(spec_file).jobs()[1]
+    a, b = run_job(job), run_job(job)
+    assert a["status"] == "ok", a["error"]
+    a.pop("elapsed_s")
+    b.pop("elapsed_s")
+    assert a == b
+    assert a["hdgym_version"] and json.loads(a["inputs"])["seed"] == job.seed
+
+
+BAD = [
+    # (replace this, with this, message part, line of the key)
+    ('presets = ["tuttle-joint1", "drive.toml"]', 'presets = ["tuttle-joint1", "nope"]',
+     "unknown preset 'nope'", 4),
+    ('"compliance.stiffness" = 0.3', '"compliance.stiffnes" = 0.3',
+     "unknown parameter 'compliance.stiffnes'", 10),
+    ('"load.inertia" = [1.0, 1.5]', '"load.inertia" = []', "is empty", 14),
+    ('"load.inertia" = [1.0, 1.5]', '"load.inertai" = [1.0]', "unknown parameter", 14),
+    ('"load.inertia" = [1.0, 1.5]', '"load.inertia" = [1.0, -2.0]', "load.inertia", 14),
+    ('"friction.output" = 0.3', '"friction.output" = -0.1', ">= 0", 11),
+    ('scenarios = ["current_steps", "locked_random"]', 'scenarios = ["current_steps", "warp"]',
+     "unknown scenario 'warp'", 5),
+    ('quick = true', 'quick = true\nworkers = 3', "unknown key 'workers' in [sweep]", 8),
+    ('[grid]', '[gird]', "unknown key 'gird'", 13),
+    ('fractions = [0.3]', 'fractoins = [0.3]', "unknown option 'fractoins'", 17),
+    ('fractions = [0.3]', 'fractions = []', "non-empty list", 17),
+    ('seeds = [0, 3]', 'seeds = [0, -3]', "seeds", 6),
+    ('"friction.output" = 0.3', '"transmission.grounded" = 0.3', "not numeric", 11),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "msg", "line"), BAD)
+def test_bad_spec_names_file_and_line(tmp_path: Path, spec_file: Path, old: str, new: str,
+                                      msg: str, line: int) -> None:
+    text = SPEC.replace(old, new)
+    assert text != SPEC
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    out = tmp_path / "out"
+    with pytest.raises(ValueError) as info:
+        run_sweep(bad, out, progress=False)
+    text_msg = str(info.value)
+    assert f"{bad}, line {line}:" in text_msg, text_msg
+    assert msg in text_msg, text_msg
+    assert not out.exists(), "a bad spec must fail before anything is written"
+
+
+def test_find_line_handles_quoted_dotted_and_array_tables() -> None:
+    text = textwrap.dedent("""\
+        [sweep]
+        seeds = 3
+        [spreads]
+        "compliance.stiffness" = 0.3
+        friction.output = 0.2
+        [spreads.load]
+        inertia = 0.1
+        [[controllers]]
+        name = "a"
+        [[controllers]]
+        name = "b"
+        """)
+    assert find_line(text, "sweep", "seeds") == 2
+    assert find_line(text, "spreads", "compliance.stiffness") == 4
+    assert find_line(text, "spreads", "friction.output") == 5
+    assert find_line(text, "spreads.load", "inertia") == 7
+    assert find_line(text, "controllers", "name", 1) == 11
+    with pytest.raises(ValueError, match=r"x\.toml, line 9: spread of 'load.inertia'"):
+        parse_spec(text.replace("inertia = 0.1", "inertia = -0.1").replace(
+            "seeds = 3", 'seeds = 3\npresets = ["tuttle-joint1"]\nscenarios = ["current_steps"]'
+        ).replace("[[controllers]]\nname = \"a\"\n[[controllers]]\nname = \"b\"\n", ""),
+            "x.toml")
+
+
+def test_bundled_specs_are_valid() -> None:
+    assert "open-loop" in spec_names()
+    for name in spec_names():
+        try:
+            spec = load_spec(spec_path(name))
+        except ValueError as exc:  # a spec whose scenarios' package is not importable here
+            if "not importable" in str(exc) or "cannot import" in str(exc):
+                continue
+            raise
+        assert spec.jobs()
+
+
+# --------------------------------------------------------- results and resume
+
+
+def test_store_drops_truncated_last_line_and_widens_header(tmp_path: Path) -> None:
+    f = tmp_path / "results.csv"
+    with ResultsStore(f, ["job_id", "a"]) as s:
+        s.append({"job_id": "x1", "a": 1.5})
+        s.append({"job_id": "x2", "a": 2.5, "b": "new, with comma"})
+    with f.open("a") as fh:
+        fh.write("x3,3.5,tr")  # killed mid-row
+    with ResultsStore(f, ["job_id", "a"]) as s:
+        assert s.done == {"x1", "x2"} and s.dropped == 1
+        s.append({"job_id": "x4", "a": 4.0})
+    header, rows = read_rows(f)
+    assert header == ["job_id", "a", "b"]
+    assert [r["job_id"] for r in rows] == ["x1", "x2", "x4"]
+    assert rows[1]["b"] == "new, with comma" and rows[0]["b"] == ""
+    assert float(rows[0]["a"]) == 1.5
+    assert f.read_text().endswith("\n")
+
+
+def test_local_sweep_writes_resumes_and_summarizes(tmp_path: Path, spec_file: Path) -> None:
+    out = tmp_path / "run"
+    res = run_sweep(spec_file, out, workers=2, progress=False)
+    assert (res.total, res.skipped, res.ran, res.errors) == (16, 0, 16, 0)
+    assert (out / "spec.toml").read_text() == SPEC
+    full = _rows(out)
+    assert len(full) == 16
+    r = next(iter(full.values()))
+    assert {"param:compliance.stiffness", "param:friction.output", "param:load.inertia"} <= set(r)
+    steps = [r for r in full.values() if r["scenario"] == "current_steps"]
+    assert all(float(r["speed_at_0.3Imax"]) > 0 for r in steps)
+    locked = [r for r in full.values() if r["scenario"] == "locked_random"]
+    assert all(float(r["torque_rms"]) > 0 for r in locked)
+    assert all(r["speed_at_0.3Imax"] == "" for r in locked)
+
+    # again: nothing to do
+    res = run_sweep(spec_file, out, workers=2, progress=False, summarize=False)
+    assert (res.skipped, res.ran) == (16, 0)
+
+    # interrupted: keep 5 whole rows and half of the 6th, then resume
+    lines = (out / "results.csv").read_text().splitlines(keepends=True)
+    (out / "results.csv").write_text("".join(lines[:6]) + lines[6][: len(lines[6]) // 2])
+    res = run_sweep(spec_file, out, workers=1, progress=False)
+    assert (res.skipped, res.ran) == (5, 11)
+    assert _rows(out) == full
+
+    md = (out / "summary.md").read_text()
+    assert "| tuttle-joint1 | – | torque_rms | 4 |" in md
+    assert "Regenerate: `hdgym sweep" in md
+    assert (out / "summary.png").stat().st_size > 10_000
+
+
+def test_failing_job_is_a_row_not_a_crash(tmp_path: Path, spec_file: Path) -> None:
+    @register("boom_for_test", options={})
+    def boom(params, job):  # noqa: ANN001
+        if job.seed == 3:
+            raise RuntimeError("diverged\non purpose")
+        return {"x": float(job.run_rng().uniform())}
+
+    assert "boom_for_test" in scenario_names()
+    f = tmp_path / "boom.toml"
+    f.write_text(textwrap.dedent("""\
+        [sweep]
+        presets = ["tuttle-joint1"]
+        scenarios = ["boom_for_test"]
+        seeds = [0, 3]
+        """))
+    res = run_sweep(f, tmp_path / "out", workers=1, progress=False)
+    assert (res.ran, res.errors) == (2, 1)
+    rows = _rows(tmp_path / "out")
+    err = next(r for r in rows.values() if r["status"] == "error")
+    assert err["error"] == "RuntimeError: diverged on purpose" and err["x"] == ""
+    assert "Failed jobs" in (tmp_path / "out" / "summary.md").read_text()
+
+
+def test_importable_scenario_by_module_path(tmp_path: Path) -> None:
+    f = tmp_path / "imp.toml"
+    f.write_text(textwrap.dedent("""\
+        [sweep]
+        presets = ["tuttle-joint2"]
+        scenarios = ["hdgym.sweep.scenarios:locked_random"]
+        seeds = 1
+        quick = true
+        """))
+    res = run_sweep(f, tmp_path / "out", workers=1, progress=False, summarize=False)
+    assert res.errors == 0
+    (row,) = _rows(tmp_path / "out").values()
+    assert float(row["torque_rms"]) > 0
+
+
+# ------------------------------------------------------------------ backends
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None,
+                    reason='Ray is not installed (optional extra: pip install "hdgym[ray]")')
+def test_ray_backend_gives_the_same_rows_as_the_local_pool(tmp_path: Path,
+                                                           spec_file: Path) -> None:
+    run_sweep(spec_file, tmp_path / "local", workers=2, progress=False, summarize=False)
+    run_sweep(spec_file, tmp_path / "ray", backend="ray", workers=2, progress=False,
+              summarize=False)
+    local, ray_rows = _rows(tmp_path / "local"), _rows(tmp_path / "ray")
+    assert len(local) == 16
+    assert local == ray_rows
+
+
+def test_results_csv_is_plain_csv(tmp_path: Path, spec_file: Path) -> None:
+    out = tmp_path / "run"
+    run_sweep(spec_file, out, workers=1, progress=False, summarize=False)
+    with (out / "results.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 16
+    vals = np.array([float(r["param:compliance.stiffness"]) for r in rows])
+    assert np.all(np.isfinite(vals)) and len(set(vals)) > 1
