@@ -182,7 +182,7 @@ class JointBatch:
         self.torque_scale = m.torque_constant * a.current_limit * self.ratio
         self.speed_scale = a.voltage_limit / m.back_emf_constant if m.back_emf_constant > 0 \
             else 1000.0
-        self.torque_limit = 3.0 * self.torque_scale if torque_limit is None else float(torque_limit)
+        self.torque_limit = 8.0 * self.torque_scale if torque_limit is None else float(torque_limit)
         self.speed_limit = 1.5 * self.speed_scale if speed_limit is None else float(speed_limit)
         if not (self.torque_limit > 0 and self.speed_limit > 0):
             raise ValueError("torque_limit and speed_limit must be > 0")
