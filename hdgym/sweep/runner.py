@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from hdgym.params import atomic_write_text
@@ -79,6 +79,7 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     _copy_spec(spec, out_dir)
+    jobs = [replace(j, workdir=str((out_dir / "jobs").resolve())) for j in jobs]
 
     columns = list(FIXED_COLUMNS) + (param_columns(jobs[0]) if jobs else [])
     t0 = time.perf_counter()

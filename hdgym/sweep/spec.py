@@ -108,6 +108,8 @@ class Job:
     agent: Mapping[str, Any] | None = None
     quick: bool = False
     params_toml: str | None = None
+    #: where a job may keep files (trained policies); not an input, not hashed
+    workdir: str | None = field(default=None, compare=False)
 
     def inputs(self) -> dict[str, Any]:
         """What defines the job (hashed into :attr:`job_id`)."""
