@@ -1,0 +1,177 @@
+"""Shared plumbing of agents: configs, env construction, policy files.
+
+A config is a TOML file (see ``agents/configs/``) with the tables
+
+* ``[env]``: ``id``, ``max_episode_steps``, ``action_repeat`` (control
+  periods per agent decision; the action is held, the rewards averaged)
+  and ``[env.kwargs]`` passed to ``gym.make`` (SI units, e.g.
+  ``target_speed`` in rad/s, ``[env.kwargs.randomize]`` relative spreads
+  per dotted parameter path);
+* ``[train]``: ``algo`` (``ppo`` or ``sac``), ``total_timesteps``,
+  ``n_envs``, ``vec_env`` (``dummy`` or ``subproc``), ``seed``,
+  ``eval_freq``, ``eval_episodes``, ``checkpoint_freq`` (env steps);
+* ``[policy]``: ``net_arch`` (hidden layer sizes), ``log_std_init``;
+* ``[algo]``: keyword arguments of the SB3 algorithm.
+
+The resolved config is stored inside the saved policy zip
+(``agents_config.json``) so :mod:`agents.evaluate` rebuilds the same env.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import tomllib
+import zipfile
+from collections.abc import Callable, Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import hdgym  # noqa: F401  (registers the env ids)
+
+CONFIG_MEMBER = "agents_config.json"
+DEFAULT_CONFIGS = {"ppo": "resonance_ppo", "sac": "resonance_sac"}
+
+
+def config_path(name: str | Path) -> Path:
+    """A config file path, or the name of a bundled config (``resonance_ppo``)."""
+    p = Path(name)
+    if p.suffix == ".toml" and p.exists():
+        return p
+    bundled = resources.files("agents").joinpath("configs", f"{Path(name).stem}.toml")
+    if bundled.is_file():
+        return Path(str(bundled))
+    raise ValueError(f"config: no such file or bundled config {str(name)!r}")
+
+
+def load_config(name: str | Path) -> dict[str, Any]:
+    """Read a config TOML (path or bundled name) into a dict, with defaults filled in."""
+    path = config_path(name)
+    try:
+        cfg = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    cfg.setdefault("env", {})
+    cfg["env"].setdefault("id", "HarmonicDriveResonance-v0")
+    cfg["env"].setdefault("max_episode_steps", 2000)
+    cfg["env"].setdefault("action_repeat", 1)
+    cfg["env"].setdefault("kwargs", {})
+    cfg.setdefault("train", {})
+    t = cfg["train"]
+    t.setdefault("algo", "ppo")
+    t.setdefault("total_timesteps", 100_000)
+    t.setdefault("n_envs", 4)
+    t.setdefault("vec_env", "dummy")
+    t.setdefault("seed", 0)
+    t.setdefault("eval_freq", 0)
+    t.setdefault("eval_episodes", 8)
+    t.setdefault("checkpoint_freq", 0)
+    cfg.setdefault("policy", {})
+    cfg.setdefault("algo", {})
+    cfg["source"] = str(path)
+    return cfg
+
+
+def env_kwargs(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """``gym.make`` keyword arguments of a config (lists become tuples)."""
+    kw = copy.deepcopy(dict(cfg["env"].get("kwargs", {})))
+    if isinstance(kw.get("target_speed"), list):
+        kw["target_speed"] = tuple(kw["target_speed"])
+    return kw
+
+
+class ActionRepeat(gym.Wrapper):
+    """Hold each action for ``repeat`` control periods; the reward is their mean.
+
+    The episode ends at the first period that ends it; ``info`` is the last
+    period's.
+    """
+
+    def __init__(self, env: gym.Env, repeat: int) -> None:
+        super().__init__(env)
+        if int(repeat) != repeat or repeat < 1:
+            raise ValueError(f"action_repeat must be a whole number >= 1, got {repeat!r}")
+        self.repeat = int(repeat)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        total, count = 0.0, 0
+        for _ in range(self.repeat):
+            obs, r, term, trunc, info = self.env.step(action)
+            total += float(r)
+            count += 1
+            if term or trunc:
+                break
+        return obs, total / count, term, trunc, info
+
+
+def make_env(cfg: Mapping[str, Any], monitor_file: str | None = None,
+             extra_kwargs: Mapping[str, Any] | None = None) -> gym.Env:
+    """One wrapped env of a config (TimeLimit, ActionRepeat, SB3 Monitor)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    e = cfg["env"]
+    kw = env_kwargs(cfg)
+    kw.update(extra_kwargs or {})
+    env = gym.make(e["id"], max_episode_steps=int(e["max_episode_steps"]), **kw)
+    if int(e["action_repeat"]) > 1:
+        env = ActionRepeat(env, int(e["action_repeat"]))
+    return Monitor(env, filename=monitor_file)
+
+
+def make_vec_env(cfg: Mapping[str, Any], n_envs: int, seed: int,
+                 monitor_dir: str | Path | None = None, kind: str = "dummy") -> Any:
+    """An SB3 VecEnv of ``n_envs`` configured envs, env ``i`` seeded ``seed + i``."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    def thunk(i: int) -> Callable[[], gym.Env]:
+        def _make() -> gym.Env:
+            f = None if monitor_dir is None else str(Path(monitor_dir) / f"env{i}")
+            return make_env(cfg, f)
+        return _make
+
+    fns = [thunk(i) for i in range(n_envs)]
+    if kind == "subproc":
+        venv = SubprocVecEnv(fns, start_method="fork")
+    elif kind == "dummy":
+        venv = DummyVecEnv(fns)
+    else:
+        raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {kind!r}")
+    venv.seed(seed)
+    return venv
+
+
+def embed_config(zip_path: str | Path, cfg: Mapping[str, Any]) -> None:
+    """Store the resolved config inside a saved SB3 policy zip."""
+    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
+        if CONFIG_MEMBER not in zf.namelist():
+            zf.writestr(CONFIG_MEMBER, json.dumps(cfg, indent=1, default=str))
+
+
+def policy_config(zip_path: str | Path) -> dict[str, Any] | None:
+    """The config stored in a policy zip by :func:`embed_config`, if any."""
+    with zipfile.ZipFile(zip_path) as zf:
+        if CONFIG_MEMBER not in zf.namelist():
+            return None
+        return json.loads(zf.read(CONFIG_MEMBER))
+
+
+def load_policy(path: str | Path) -> Any:
+    """Load a saved SB3 model (PPO or SAC, from the stored config) on the CPU."""
+    from stable_baselines3 import PPO, SAC
+
+    cfg = policy_config(path) or {}
+    algo = str(cfg.get("train", {}).get("algo", "ppo")).lower()
+    cls = {"ppo": PPO, "sac": SAC}.get(algo)
+    if cls is None:
+        raise ValueError(f"{path}: unknown algo {algo!r} in the stored config")
+    return cls.load(str(path), device="cpu")
+
+
+def deg(x: float | np.ndarray) -> float | np.ndarray:
+    """rad -> deg (for reports)."""
+    return np.degrees(x) if isinstance(x, np.ndarray) else math.degrees(x)

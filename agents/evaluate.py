@@ -1,0 +1,254 @@
+"""Evaluate a saved policy and the baselines on randomized resonance episodes.
+
+    python -m agents.evaluate --policy agents/policies/resonance_ppo.zip --episodes 50 --seed 1000
+    python -m agents.evaluate --controllers pi full --episodes 20 --out results/rl/eval.md
+
+All controllers run on the same episodes: one batch of ``--episodes`` envs
+of the native vector env, env ``i`` seeded ``seed + i``, so every controller
+sees the same randomized drives, WG start angles and target speeds. The env
+is the one stored in the policy zip (or ``--config``), with its action
+repeat.
+
+Per episode, from the *true* states in ``info``:
+
+* reached: the motor speed, averaged over the last 50 ms, comes within 5 %
+  of the target at some time (``time to target`` is the first such time);
+* trapped: that averaged speed never exceeds 9,000 deg/s (the 2x-order
+  trap sits near 8,000 deg/s);
+* peak torque: the largest |flexspline torque| in the episode.
+
+Controllers: ``policy`` (the SB3 model, deterministic), ``pi`` (PI speed
+loop, :mod:`agents.baselines`, limited by the amplifier's current and
+back-EMF limits), ``pi@4A`` (the same PI with its output limited to 4 A,
+e.g. a continuous current rating), ``full`` (constant full current) and
+``const@X`` (constant X times full current).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from agents.baselines import ConstantCurrent, PISpeedController
+from agents.common import env_kwargs, load_config, load_policy, policy_config
+
+SMOOTH_S = 0.05
+REACH_TOL = 0.05
+TRAP_SPEED = math.radians(9000.0)
+
+
+@dataclass
+class EpisodeStats:
+    controller: str
+    episodes: int
+    reached: float  # fraction
+    trapped: float  # fraction
+    time_to_target_s: float  # mean over reached episodes (nan if none)
+    peak_torque_mean: float  # N m, mean over episodes of the episode peak
+    peak_torque_max: float  # N m
+    max_speed_deg_s: float  # mean over episodes of the highest averaged speed
+    terminated: float  # fraction ended by the env's safety limits
+
+
+def make_batch_env(cfg: dict[str, Any], n: int, seed: int) -> Any:
+    """The native vector env of a config: ``n`` envs, env ``i`` reset with ``seed + i``."""
+    e = cfg["env"]
+    venv = gym.make_vec(e["id"], num_envs=n, vectorization_mode="vector_entry_point",
+                        max_episode_steps=int(e["max_episode_steps"]), **env_kwargs(cfg))
+    return venv
+
+
+def controller_for(name: str, venv: Any, model: Any = None) -> Any:
+    """A controller object with ``predict`` from a controller name."""
+    u = venv.unwrapped if hasattr(venv, "unwrapped") else venv
+    b = u.batch
+    if name == "policy":
+        if model is None:
+            raise ValueError("controller 'policy' needs --policy")
+        return model
+    if name == "pi" or name.startswith("pi@"):
+        limit = None
+        if name.startswith("pi@"):
+            limit = float(name[3:].rstrip("A"))
+        return PISpeedController(u.params, b.speed_scale, b.ctrl_dt, current_limit=limit)
+    if name == "full":
+        return ConstantCurrent(1.0)
+    if name.startswith("const@"):
+        return ConstantCurrent(float(name[6:]))
+    raise ValueError(f"unknown controller {name!r}; use policy, pi, pi@<A>, full or const@<x>")
+
+
+def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
+                 ) -> dict[str, np.ndarray]:
+    """One episode in each of ``n`` batched envs; returns per-period traces ``(n, T)``.
+
+    Keys: ``time``, ``speed`` (true motor speed, rad/s), ``torque`` (true
+    flexspline torque, N m), ``current`` (true motor current, A),
+    ``target`` (rad/s, per episode), ``length`` (periods, per episode),
+    ``terminated`` (bool, per episode).
+    """
+    venv = make_batch_env(cfg, n, seed)
+    u = venv.unwrapped if hasattr(venv, "unwrapped") else venv
+    repeat = int(cfg["env"]["action_repeat"])
+    steps = int(cfg["env"]["max_episode_steps"])
+    obs, info = venv.reset(seed=seed)
+    if hasattr(controller, "reset"):
+        controller.reset(n)
+    speed = np.zeros((n, steps))
+    torque = np.zeros((n, steps))
+    current = np.zeros((n, steps))
+    target = np.asarray(info["target_speed"], dtype=float).copy()
+    length = np.full(n, steps)
+    terminated = np.zeros(n, dtype=bool)
+    alive = np.ones(n, dtype=bool)
+    first = np.ones(n, dtype=bool)
+    action = np.zeros((n, 1), dtype=np.float32)
+    for k in range(steps):
+        if k % repeat == 0:
+            a, _ = controller.predict(obs, episode_start=first, deterministic=True)
+            action = np.asarray(a, dtype=np.float32).reshape(n, 1)
+            first[:] = False
+        obs, _r, term, trunc, info = venv.step(action)
+        speed[alive, k] = info["motor_velocity"][alive]
+        torque[alive, k] = info["output_torque"][alive]
+        current[alive, k] = info["motor_current"][alive]
+        ended = alive & (term | trunc)
+        length[ended] = k + 1
+        terminated |= ended & term
+        alive &= ~ended
+        if not alive.any():
+            break
+    venv.close()
+    time = np.arange(1, steps + 1) * u.batch.ctrl_dt
+    return {"time": time, "speed": speed, "torque": torque, "current": current,
+            "target": target, "length": length, "terminated": terminated}
+
+
+def smoothed(speed: np.ndarray, dt: float) -> np.ndarray:
+    """Trailing mean over :data:`SMOOTH_S` along the last axis."""
+    w = max(int(round(SMOOTH_S / dt)), 1)
+    c = np.cumsum(speed, axis=-1)
+    out = np.empty_like(speed)
+    out[..., :w] = c[..., :w] / np.arange(1, w + 1)
+    out[..., w:] = (c[..., w:] - c[..., :-w]) / w
+    return out
+
+
+def episode_metrics(tr: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per-episode reached / time to target / trapped / peak torque / max speed."""
+    dt = float(tr["time"][1] - tr["time"][0])
+    ws = smoothed(tr["speed"], dt)
+    n, steps = ws.shape
+    valid = np.arange(steps)[None, :] < tr["length"][:, None]
+    near = (np.abs(ws - tr["target"][:, None]) <= REACH_TOL * tr["target"][:, None]) & valid
+    reached = near.any(axis=1)
+    t_reach = np.where(reached, tr["time"][np.argmax(near, axis=1)], np.nan)
+    wmax = np.where(valid, ws, -np.inf).max(axis=1)
+    peak = np.where(valid, np.abs(tr["torque"]), 0.0).max(axis=1)
+    return {"reached": reached, "time_to_target": t_reach, "trapped": wmax < TRAP_SPEED,
+            "peak_torque": peak, "max_speed": wmax, "terminated": tr["terminated"]}
+
+
+def summarize(name: str, m: dict[str, np.ndarray]) -> EpisodeStats:
+    n = m["reached"].size
+    tt = m["time_to_target"][m["reached"]]
+    return EpisodeStats(
+        controller=name, episodes=n, reached=float(m["reached"].mean()),
+        trapped=float(m["trapped"].mean()),
+        time_to_target_s=float(tt.mean()) if tt.size else float("nan"),
+        peak_torque_mean=float(m["peak_torque"].mean()),
+        peak_torque_max=float(m["peak_torque"].max()),
+        max_speed_deg_s=float(np.degrees(m["max_speed"]).mean()),
+        terminated=float(m["terminated"].mean()))
+
+
+def evaluate(cfg: dict[str, Any], controllers: list[str], n: int, seed: int,
+             model: Any = None) -> tuple[list[EpisodeStats], dict[str, dict[str, np.ndarray]]]:
+    """Stats and traces of each controller on the same ``n`` episodes."""
+    stats, traces = [], {}
+    for name in controllers:
+        probe = make_batch_env(cfg, 1, seed)
+        ctl = controller_for(name, probe, model)
+        probe.close()
+        tr = run_episodes(cfg, ctl, n, seed)
+        traces[name] = tr
+        stats.append(summarize(name, episode_metrics(tr)))
+    return stats, traces
+
+
+LABELS = {"policy": "PPO policy", "pi": "PI speed loop (amplifier limits)",
+          "full": "constant full current"}
+
+
+def label(name: str) -> str:
+    if name in LABELS:
+        return LABELS[name]
+    if name.startswith("pi@"):
+        return f"PI speed loop, output limited to {name[3:].rstrip('A')} A"
+    if name.startswith("const@"):
+        return f"constant {name[6:]} x full current"
+    return name
+
+
+def markdown_table(stats: list[EpisodeStats]) -> str:
+    rows = ["| controller | episodes | reached target | trapped < 9,000 deg/s | mean time to "
+            "target (s) | peak flexspline torque, mean / max (N m) | highest speed, mean "
+            "(deg/s) | safety stops |",
+            "|---|---|---|---|---|---|---|---|"]
+    for s in stats:
+        tt = "-" if math.isnan(s.time_to_target_s) else f"{s.time_to_target_s:.2f}"
+        rows.append(f"| {label(s.controller)} | {s.episodes} | {100 * s.reached:.0f} % | "
+                    f"{100 * s.trapped:.0f} % | {tt} | {s.peak_torque_mean:.0f} / "
+                    f"{s.peak_torque_max:.0f} | {s.max_speed_deg_s:,.0f} | "
+                    f"{100 * s.terminated:.0f} % |")
+    return "\n".join(rows) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agents.evaluate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", type=Path, help="saved SB3 policy zip")
+    ap.add_argument("--config", help="env config (default: the one stored in the policy, "
+                    "else resonance_ppo)")
+    ap.add_argument("--episodes", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--controllers", nargs="+",
+                    help="default: policy (with --policy), pi, full")
+    ap.add_argument("--out", type=Path, help="write the table (.md) and stats (.json) here")
+    args = ap.parse_args(argv)
+    try:
+        if args.episodes < 1:
+            raise ValueError(f"--episodes must be >= 1, got {args.episodes}")
+        model, cfg = None, None
+        if args.policy is not None:
+            if not args.policy.is_file():
+                raise ValueError(f"--policy: no such file {str(args.policy)!r}")
+            model = load_policy(args.policy)
+            cfg = policy_config(args.policy)
+        if args.config or cfg is None:
+            cfg = load_config(args.config or "resonance_ppo")
+        names = args.controllers or (["policy"] if model is not None else []) + ["pi", "full"]
+        stats, _ = evaluate(cfg, names, args.episodes, args.seed, model)
+    except ValueError as exc:
+        print(f"agents.evaluate: {exc}", file=sys.stderr)
+        return 2
+    table = markdown_table(stats)
+    print(table)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.with_suffix(".md").write_text(table)
+        args.out.with_suffix(".json").write_text(
+            json.dumps([asdict(s) for s in stats], indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,244 @@
+"""Write ``results/rl/``: evaluation table, learning curve, speed-against-time figure.
+
+    python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
+    cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
+    python -m agents.report --run runs/resonance_ppo-s0
+
+``--run`` is a training output directory (monitor files, ``eval/``,
+``train.json``); without it (or if it is missing) the learning curve is
+redrawn from ``results/rl/learning_curve.csv`` when that exists.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.baselines import PISpeedController
+from agents.common import load_policy, policy_config
+from agents.evaluate import (
+    TRAP_SPEED,
+    episode_metrics,
+    evaluate,
+    label,
+    make_batch_env,
+    markdown_table,
+    smoothed,
+)
+
+DEFAULT_POLICY = Path(__file__).parent / "policies" / "resonance_ppo.zip"
+CONTROLLERS = ["policy", "pi", "pi@4A", "full"]
+
+
+def read_monitors(run: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(cumulative agent steps, episode return) over all training envs, in time order."""
+    rows = []
+    for f in sorted((run / "monitor").glob("*.monitor.csv")):
+        with f.open() as fh:
+            fh.readline()  # '#{"t_start": ...}'
+            for r in csv.DictReader(fh):
+                rows.append((float(r["t"]), float(r["r"]), int(r["l"])))
+    rows.sort()
+    if not rows:
+        return np.zeros(0), np.zeros(0)
+    t, r, n = (np.array(c) for c in zip(*rows, strict=True))
+    return np.cumsum(n), r
+
+
+def learning_curve(run: Path | None, out: Path) -> dict[str, Any]:
+    """Write learning_curve.csv (when ``run`` has logs) and learning_curve.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    csv_path = out / "learning_curve.csv"
+    info: dict[str, Any] = {}
+    if run is not None and (run / "monitor").is_dir():
+        steps, ret = read_monitors(run)
+        ev = run / "eval" / "evaluations.npz"
+        es, er = (np.zeros(0), np.zeros((0, 1)))
+        if ev.exists():
+            d = np.load(ev)
+            es, er = d["timesteps"], d["results"]
+        with csv_path.open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["source", "agent_steps", "episode_return"])
+            for s, r in zip(steps, ret, strict=True):
+                w.writerow(["train", int(s), f"{r:.3f}"])
+            for s, r in zip(es, er.mean(axis=1), strict=True):
+                w.writerow(["eval_mean", int(s), f"{r:.3f}"])
+        if (run / "train.json").exists():
+            info = json.loads((run / "train.json").read_text())
+    if not csv_path.exists():
+        return info
+    train_s, train_r, ev_s, ev_r = [], [], [], []
+    with csv_path.open() as fh:
+        for row in csv.DictReader(fh):
+            (train_s if row["source"] == "train" else ev_s).append(int(row["agent_steps"]))
+            (train_r if row["source"] == "train" else ev_r).append(float(row["episode_return"]))
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if train_s:
+        ts, tr = np.array(train_s), np.array(train_r)
+        ax.plot(ts, tr, ".", ms=2, alpha=0.3, color="C0", label="training episodes")
+        k = min(32, len(tr))
+        ax.plot(ts[k - 1:], np.convolve(tr, np.ones(k) / k, "valid"), color="C0",
+                label=f"training, mean of {k}")
+    if ev_s:
+        ax.plot(ev_s, ev_r, "o-", color="C3", label="evaluation (deterministic)")
+    ax.set_xlabel("agent steps (one step = 5 control periods of 1 ms)")
+    ax.set_ylabel("episode return")
+    ax.set_title("PPO on HarmonicDriveResonance-v0 (tuttle-joint1, randomized)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    fig.savefig(out / "learning_curve.png", dpi=110)
+    plt.close(fig)
+    return info
+
+
+def speed_figure(traces: dict[str, dict[str, np.ndarray]], out: Path, episode: int = 0) -> None:
+    """Speed against time, one episode per controller, and the flexspline torque."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, axt) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True,
+                                  gridspec_kw={"height_ratios": [3, 2]})
+    colors = {"policy": "C2", "pi": "C1", "pi@4A": "C3", "full": "C0"}
+    tgt = None
+    for name, tr in traces.items():
+        t = tr["time"]
+        dt = float(t[1] - t[0])
+        n = int(tr["length"][episode])
+        w = np.degrees(smoothed(tr["speed"][episode : episode + 1, :n], dt)[0])
+        c = colors.get(name)
+        ax.plot(t[:n], np.degrees(tr["speed"][episode, :n]), color=c, lw=0.4, alpha=0.35)
+        ax.plot(t[:n], w, color=c, lw=1.6, label=label(name))
+        axt.plot(t[:n], tr["torque"][episode, :n], color=c, lw=0.5, alpha=0.8)
+        tgt = math.degrees(float(tr["target"][episode]))
+    if tgt is not None:
+        ax.axhline(tgt, color="k", ls="--", lw=1, label=f"target {tgt:,.0f} deg/s")
+    ax.axhspan(7000, 8600, color="0.85", zorder=0, label="2x-order resonance trap")
+    ax.axhline(math.degrees(TRAP_SPEED), color="0.5", ls=":", lw=1)
+    ax.set_ylabel("motor speed (deg/s)\nthin: true, thick: 50 ms mean")
+    ax.set_ylim(0, max(1.6 * (tgt or 10000), 14000))
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.set_title("Same randomized episode (env seed) for every controller")
+    axt.set_ylabel("flexspline torque (N m)")
+    axt.set_xlabel("time (s)")
+    axt.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "speed_vs_time.png", dpi=110)
+    plt.close(fig)
+
+
+def write_markdown(out: Path, table: str, cfg: dict[str, Any], pi_text: str,
+                   train_info: dict[str, Any], n: int, seed: int, policy: Path,
+                   extra: str) -> None:
+    e = cfg["env"]
+    kw = e.get("kwargs", {})
+    rnd = ", ".join(f"`{k}` ±{100 * v:.0f} %" for k, v in kw.get("randomize", {}).items())
+    lo, hi = (math.degrees(v) for v in kw.get("target_speed", [0, 0]))
+    tinfo = ""
+    if train_info:
+        tinfo = (f"Training: {train_info.get('algo', '').upper()}, "
+                 f"{train_info.get('agent_steps', 0):,} agent steps "
+                 f"({train_info.get('control_periods', 0):,} control periods) on "
+                 f"{train_info.get('n_envs')} envs, seed {train_info.get('seed')}, wall time "
+                 f"**{train_info.get('wall_time_s', 0) / 60:.1f} min** "
+                 f"({train_info.get('agent_steps_per_s', 0):,.0f} agent steps/s) on the shared "
+                 "2-core machine.\n")
+    text = f"""# Resonance trap: RL policy against baselines
+
+Regenerate (training ≈ the wall time below, the rest ≈ 1 min):
+
+    python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
+    cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
+    python -m agents.report --run runs/resonance_ppo-s0
+
+or, evaluating the committed policy only:
+`python -m agents.evaluate --policy {policy.as_posix()} --episodes {n} --seed {seed}
+--controllers policy pi pi@4A full`.
+
+Env: `{e['id']}` (preset tuttle-joint1, amplifier 6 A / 40 V, back-EMF limit on),
+{int(e['max_episode_steps'])} control periods of 1 ms, agent action held for
+{int(e['action_repeat'])} periods, target speed uniform in {lo:,.0f}-{hi:,.0f} deg/s,
+randomized per episode: {rnd}. `oscillation_weight` {kw.get('oscillation_weight')},
+`torque_limit` {kw.get('torque_limit')} N m (so no episode is cut short and the peak torque
+is measured). {n} episodes, env `i` seeded `{seed} + i`, the same for every controller.
+
+{tinfo}
+Metrics from the true states: *reached* = the 50 ms mean motor speed comes within 5 % of the
+target; *trapped* = it never exceeds 9,000 deg/s; peak torque = largest |flexspline torque|
+in the episode.
+
+{table}
+Baseline design: {pi_text}. Linear model `G(s) = K_t / (J s + b) / (s/w_a + 1)` with the
+output inertia reflected through the ratio (`agents/baselines.py`), gains from
+python-control, anti-windup by back-calculation onto `min(I_max, (V - K_b w)/R)`.
+
+Figures: `learning_curve.png` (training episode returns from the SB3 monitor files and the
+periodic deterministic evaluation; data in `learning_curve.csv`), `speed_vs_time.png`
+(episode 0 for each controller).
+
+{extra}
+"""
+    (out / "evaluation.md").write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m agents.report", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--policy", type=Path, default=DEFAULT_POLICY)
+    ap.add_argument("--run", type=Path, help="training output directory (learning curve)")
+    ap.add_argument("--episodes", type=int, default=50)
+    ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--out", type=Path, default=Path("results/rl"))
+    ap.add_argument("--notes", type=Path, help="markdown appended to evaluation.md")
+    args = ap.parse_args(argv)
+    if not args.policy.is_file():
+        print(f"agents.report: no such policy {str(args.policy)!r}", file=sys.stderr)
+        return 2
+    args.out.mkdir(parents=True, exist_ok=True)
+    model = load_policy(args.policy)
+    cfg = policy_config(args.policy)
+    if cfg is None:
+        print(f"agents.report: {args.policy} holds no agents config", file=sys.stderr)
+        return 2
+    stats, traces = evaluate(cfg, CONTROLLERS, args.episodes, args.seed, model)
+    table = markdown_table(stats)
+    print(table)
+    probe = make_batch_env(cfg, 1, 0)
+    u = probe.unwrapped
+    pi_text = PISpeedController(u.params, u.batch.speed_scale, u.batch.ctrl_dt).design.describe()
+    probe.close()
+    info = learning_curve(args.run, args.out)
+    if not info and (args.out / "train.json").exists():
+        info = json.loads((args.out / "train.json").read_text())
+    if info:
+        (args.out / "train.json").write_text(json.dumps(info, indent=1) + "\n")
+    speed_figure({k: traces[k] for k in ("pi", "pi@4A", "full", "policy")}, args.out)
+    per_ep = {name: {k: v.tolist() for k, v in episode_metrics(tr).items()}
+              for name, tr in traces.items()}
+    (args.out / "episodes.json").write_text(json.dumps(per_ep) + "\n")
+    (args.out / "evaluation.json").write_text(
+        json.dumps([s.__dict__ for s in stats], indent=1) + "\n")
+    extra = args.notes.read_text() if args.notes else ""
+    write_markdown(args.out, table, cfg, pi_text, info, args.episodes, args.seed, args.policy,
+                   extra)
+    print(f"wrote {args.out}/evaluation.md, learning_curve.png, speed_vs_time.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
