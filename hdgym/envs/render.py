@@ -47,26 +47,26 @@ def render_frame(state: np.ndarray, aux: np.ndarray, task: str, time: float,
                         lw=3, ls=style)
         ax.set_title(title, fontsize=9)
 
-    ax1 = fig.add_axes((0.02, 0.38, 0.46, 0.58))
-    dial(ax1, [(th_m, "tab:red", "-")], f"WG angle {math.degrees(th_m) % 360:6.1f} deg")
-    ax2 = fig.add_axes((0.52, 0.38, 0.46, 0.58))
+    ax1 = fig.add_axes((0.02, 0.40, 0.46, 0.50))
+    dial(ax1, [(th_m, "tab:red", "-")], f"WG angle {math.degrees(th_m) % 360:.1f}°")
+    ax2 = fig.add_axes((0.52, 0.40, 0.46, 0.50))
     pointers = [(th_o, "tab:blue", "-")]
     if task == "tracking":
         pointers.append((float(aux[0]), "tab:green", "--"))
-        title = f"output {math.degrees(th_o):7.2f} deg (ref dashed)"
+        title = f"output {math.degrees(th_o):.2f}° (reference dashed)"
     else:
-        title = f"output {math.degrees(th_o) % 360:6.1f} deg"
+        title = f"output {math.degrees(th_o) % 360:.1f}°"
     dial(ax2, pointers, title)
 
-    bars = [("torsion T_k", tk / torque_scale, f"{tk:7.1f} N m"),
-            ("current", cur / current_limit, f"{cur:6.2f} A")]
+    bars = [("torsion T_k", tk / torque_scale, f"{tk:.1f} N m"),
+            ("current", cur / current_limit, f"{cur:.2f} A")]
     if task == "resonance":
         bars.append(("WG speed", w_m / float(aux[0]),
-                     f"{math.degrees(w_m):7.0f} / {math.degrees(float(aux[0])):.0f} deg/s"))
+                     f"{math.degrees(w_m):.0f} / {math.degrees(float(aux[0])):.0f} °/s"))
     else:
         bars.append(("error", float(aux[1]) / 1e-3 / 10.0,
-                     f"{math.degrees(float(aux[1])) * 1e3:7.1f} mdeg"))
-    ax3 = fig.add_axes((0.25, 0.04, 0.5, 0.3))
+                     f"{math.degrees(float(aux[1])) * 1e3:.1f} m°"))
+    ax3 = fig.add_axes((0.2, 0.1, 0.42, 0.25))
     names = [b[0] for b in bars]
     vals = [float(np.clip(np.nan_to_num(b[1]), -1.5, 1.5)) for b in bars]
     colors = ["tab:purple", "tab:orange", "tab:green"]
@@ -77,8 +77,8 @@ def render_frame(state: np.ndarray, aux: np.ndarray, task: str, time: float,
     ax3.tick_params(axis="x", labelsize=7)
     ax3.invert_yaxis()
     for k, b in enumerate(bars):
-        ax3.text(1.55, k, b[2], va="center", fontsize=8)
-    fig.text(0.01, 0.01, f"t = {time:.3f} s", fontsize=8)
+        ax3.text(1.6, k, b[2], va="center", fontsize=8, clip_on=False)
+    fig.text(0.01, 0.96, f"t = {time:.3f} s", fontsize=8)
     canvas.draw()
     frame = np.asarray(canvas.buffer_rgba())[..., :3]
     return np.ascontiguousarray(frame, dtype=np.uint8)
