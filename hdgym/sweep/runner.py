@@ -111,8 +111,12 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     if summarize:
         from hdgym.sweep.summary import summarize as _summarize
 
-        summary = _summarize(out_dir, command=f"hdgym sweep {spec_path} --out {out_dir}"
-                             + (" --backend ray" if backend == "ray" else ""))
+        if quick is None:
+            command = f"hdgym sweep {spec_path} --out {out_dir}"
+        else:  # the CLI has no --quick: say it in Python
+            command = (f"python -c \"from hdgym.sweep import run_sweep; "
+                       f"run_sweep('{spec_path}', '{out_dir}', quick={quick})\"")
+        summary = _summarize(out_dir, command=command)
     if progress:
         print(f"sweep {spec.name}: {len(jobs)} jobs, {skipped} already done, {ran} run "
               f"({errors} errors) in {seconds:.1f} s on {backend}; "

@@ -261,17 +261,18 @@ def _check_agent(config: Mapping[str, Any]) -> None:
 
 @register("rl_train", needs="agent", options={}, check_slot=_check_agent)
 def rl_train(params: JointParams, job: Any) -> dict[str, float]:
-    """Train an SB3 policy (:func:`agents.train.train`) on the job's drive, then evaluate it.
+    """Train an SB3 policy on the job's drive and evaluate it: ``reached``, ``trapped``,
+    ``terminated`` (fractions of episodes), ``time_to_target_s`` (s), ``peak_torque_mean``,
+    ``peak_torque_max`` (N m, flexspline), ``max_speed_deg_s`` (deg/s), ``agent_steps``.
+
+    Training is :func:`agents.train.train`, evaluation :func:`agents.evaluate.evaluate`.
 
     One job per ``[[agents]]`` config and seed. The config's env runs on the
     job's (randomized) drive; the SB3 seed is the job's seed, as
     ``python -m agents.train --seed N``. ``quick`` trains ``quick_timesteps``
     (default 2048) agent steps. The policy goes to
-    ``DIR/jobs/<job_id>/final.zip``. Metrics (:mod:`agents.evaluate`, on
-    ``eval_episodes`` episodes seeded from the job): ``reached``,
-    ``trapped``, ``terminated`` (fractions), ``time_to_target_s`` (s),
-    ``peak_torque_mean``, ``peak_torque_max`` (N m), ``max_speed_deg_s``
-    (deg/s), ``agent_steps``.
+    ``DIR/jobs/<job_id>/final.zip``. Evaluation runs ``eval_episodes``
+    episodes seeded from the job (default 8, quick 4).
     """
     import copy
     import tempfile
@@ -326,7 +327,17 @@ def _benchmark() -> Any | None:
 def _controller_scenarios() -> list[str]:
     bm = _benchmark()
     table = getattr(bm, "SCENARIOS", None) if bm is not None else None
-    return sorted(table) if isinstance(table, Mapping) else []
+    if isinstance(table, Mapping):
+        return sorted(table)
+    return sorted(_FALLBACK) if _building_blocks() else []
+
+
+def _building_blocks() -> bool:
+    try:
+        import controllers.scenarios  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
@@ -339,13 +350,13 @@ def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
 
 def _controller_scenario(name: str) -> Scenario:
     bm = _benchmark()
-    if bm is None:
-        raise ValueError(f"unknown scenario 'controllers:{name}' (the controllers package "
-                         f"or controllers.benchmark is not importable)")
-    table = getattr(bm, "SCENARIOS", None)
+    table = getattr(bm, "SCENARIOS", None) if bm is not None else None
     if not isinstance(table, Mapping):
-        raise ValueError(f"unknown scenario 'controllers:{name}' (controllers.benchmark has "
-                         f"no SCENARIOS table of per-scenario functions)")
+        if name in _FALLBACK and _building_blocks():
+            return _FALLBACK[name]
+        raise ValueError(f"unknown scenario 'controllers:{name}' (the controllers package "
+                         f"is not importable, or controllers.benchmark has no SCENARIOS table "
+                         f"and {name!r} is not one of the built-in {sorted(_FALLBACK)})")
     if name not in table:
         raise ValueError(f"unknown scenario 'controllers:{name}'")
     bench_fn = table[name]
@@ -364,3 +375,125 @@ def _controller_scenario(name: str) -> Scenario:
 
     return Scenario(f"controllers:{name}", run, needs="controller", options=None,
                     check_slot=check_slot, doc=(bench_fn.__doc__ or "").strip())
+
+
+# ------------------------------------------- controllers from the building blocks
+#
+# Used while controllers.benchmark has no SCENARIOS table: closed-loop runs
+# built from controllers.scenarios (closed_loop, motor_pid, ramp, min_jerk).
+# Each controller is designed on the *nominal* drive (the preset at the grid
+# point, no spreads) and run on the job's randomized drive: the sweep measures
+# robustness to the variation, not re-tuning.
+
+CONTROLLER_KEYS: dict[str, Any] = {
+    "name": "", "kind": "", "crossover_hz": 0.0, "phase_margin_deg": 0.0,
+    "dob_bandwidth_hz": 0.0, "orders": [], "gain": 0.0,
+}
+CONTROLLER_KINDS = ("pid", "pid+dob", "pid+repetitive")
+
+
+def _check_controller(config: Mapping[str, Any]) -> None:
+    for key, value in config.items():
+        if key not in CONTROLLER_KEYS:
+            raise OptionError(f"unknown key {key!r}; known: {', '.join(sorted(CONTROLLER_KEYS))}",
+                              key)
+        default = CONTROLLER_KEYS[key]
+        if isinstance(default, float) and not (isinstance(value, (int, float))
+                                               and not isinstance(value, bool) and value > 0):
+            raise OptionError(f"{key} must be a number > 0, got {value!r}", key)
+        if isinstance(default, list) and not (isinstance(value, list) and value and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                for v in value)):
+            raise OptionError(f"{key} must be a non-empty list of numbers > 0, got {value!r}",
+                              key)
+    kind = config.get("kind", "pid")
+    if kind not in CONTROLLER_KINDS:
+        raise OptionError(f"kind must be one of {', '.join(CONTROLLER_KINDS)}, got {kind!r}",
+                          "kind" if "kind" in config else "name")
+
+
+def _nominal(job: Any) -> JointParams:
+    p = job.base_params()
+    for path in sorted(job.grid):
+        v = job.grid[path]
+        p = p.set(path, tuple(v) if isinstance(v, list) else v)
+    return p
+
+
+def build_controller(config: Mapping[str, Any], nominal: JointParams) -> Any:
+    """A controller of ``config`` (see :data:`CONTROLLER_KEYS`) designed on ``nominal``."""
+    from controllers.dob import DisturbanceObserver
+    from controllers.repetitive import RepetitiveController
+    from controllers.scenarios import half_count, motor_pid
+
+    pid, _ = motor_pid(nominal, config.get("crossover_hz"),
+                       float(config.get("phase_margin_deg", 45.0)))
+    kind = config.get("kind", "pid")
+    if kind == "pid":
+        return pid
+    if kind == "pid+dob":
+        j = nominal.motor.inertia + nominal.load.inertia / nominal.ratio**2
+        return DisturbanceObserver(pid, j, nominal.motor.torque_constant,
+                                   float(config.get("dob_bandwidth_hz", 30.0)),
+                                   nominal.integration.ctrl_dt,
+                                   current_limit=nominal.amplifier.current_limit)
+    if kind == "pid+repetitive":
+        return RepetitiveController(pid, nominal.ratio, tuple(config.get("orders", (1, 2, 4))),
+                                    float(config.get("gain", 0.5)), start=0.2,
+                                    output_offset=half_count(nominal.sensors.output_counts))
+    raise ValueError(f"unknown controller kind {kind!r}")
+
+
+def _tracking_metrics(run: Any, settle: float) -> dict[str, float]:
+    t = run.time
+    e = run.error
+    late = t >= settle
+    cur = np.asarray(run.record.columns["current_command"])
+    return {"rms_error": float(np.sqrt(np.mean(e[late] ** 2))),
+            "max_error": float(np.max(np.abs(e[late]))),
+            "final_error": float(abs(e[-1])),
+            "rms_current": float(np.sqrt(np.mean(cur**2))),
+            "peak_current": float(np.max(np.abs(cur)))}
+
+
+def _ramp(params: JointParams, job: Any) -> dict[str, float]:
+    """Output ramp at ``speed`` output rad/s: true output error ``rms_error``, ``max_error``,
+    ``final_error`` (output rad, after ``settle`` s), ``rms_current``, ``peak_current`` (A).
+    """
+    from controllers.scenarios import closed_loop, ramp
+
+    sc = _FALLBACK["ramp"]
+    duration = _duration(sc, job)
+    ctl = build_controller(dict(job.controller or {}), _nominal(job))
+    run = closed_loop(params, ctl, duration, ramp(float(sc.option(job, "speed")),
+                                                  ramp_time=min(0.5, duration / 4)),
+                      seed=job.run_seed())
+    return _tracking_metrics(run, min(float(sc.option(job, "settle")), duration / 2))
+
+
+def _point_to_point(params: JointParams, job: Any) -> dict[str, float]:
+    """Minimum-jerk move of ``distance`` output rad in ``move_time`` s (from 0.05 s; quick runs
+    keep the move and end 0.25 s after it at the latest): true output error
+    ``rms_error``, ``max_error``, ``final_error`` (output rad), ``rms_current``,
+    ``peak_current`` (A).
+    """
+    from controllers.scenarios import closed_loop, min_jerk
+
+    sc = _FALLBACK["point_to_point"]
+    duration = _duration(sc, job)
+    move = min(float(sc.option(job, "move_time")), duration - 0.25)
+    ctl = build_controller(dict(job.controller or {}), _nominal(job))
+    run = closed_loop(params, ctl, duration, min_jerk(float(sc.option(job, "distance")), 0.05,
+                                                      move), seed=job.run_seed())
+    return _tracking_metrics(run, 0.0)
+
+
+_FALLBACK: dict[str, Scenario] = {
+    "ramp": Scenario("controllers:ramp", _ramp, "controller",
+                     {"speed": 0.2, "duration": 2.0, "quick_duration": 0.6, "settle": 0.5},
+                     _check_controller, (_ramp.__doc__ or "").strip()),
+    "point_to_point": Scenario("controllers:point_to_point", _point_to_point, "controller",
+                               {"distance": 0.1, "move_time": 0.5, "duration": 1.5,
+                                "quick_duration": 0.8}, _check_controller,
+                               (_point_to_point.__doc__ or "").strip()),
+}

@@ -66,6 +66,18 @@ def group_stats(rows: list[dict[str, str]], header: list[str]
     return out
 
 
+def _scenario_doc(name: str) -> str:
+    """First paragraph of a scenario's docstring (says what the metrics are, in SI)."""
+    try:
+        from hdgym.sweep.scenarios import get_scenario
+
+        fn = get_scenario(name).fn
+    except Exception:  # noqa: BLE001 - the summary must not fail on a missing package
+        return ""
+    doc = (fn.__doc__ or "").strip().split("\n\n")
+    return " ".join(line.strip() for line in doc[0].splitlines()) if doc else ""
+
+
 def _fmt(v: float) -> str:
     if not math.isfinite(v):
         return "–"
@@ -120,8 +132,11 @@ def summarize(out_dir: str | Path, *, command: str | None = None,
     lines += ["Statistics over seeds, randomized drives and grid points of each "
               "(preset, controller) group; std is the sample standard deviation.", ""]
     for scen, groups in stats.items():
-        lines += [f"## {scen}", "",
-                  "| preset | controller | metric | n | mean | std | min | max |",
+        lines += [f"## {scen}", ""]
+        doc = _scenario_doc(scen)
+        if doc:
+            lines += [doc, ""]
+        lines += ["| preset | controller | metric | n | mean | std | min | max |",
                   "|---|---|---|---:|---:|---:|---:|---:|"]
         for (preset, ctrl), ms in groups.items():
             for m, s in ms.items():
@@ -194,14 +209,15 @@ def _figure(stats: dict[str, dict[tuple[str, str], dict[str, dict[str, float]]]]
                 continue
             ax.bar(xs, mean, width * 0.9, yerr=std, capsize=3, label=c or "open loop",
                    alpha=0.8)
-            ax.vlines(xs, lo, hi, colors="k", linewidth=0.8)
-            ax.plot(xs, lo, "k_", xs, hi, "k_")
+            ax.vlines(xs, lo, hi, colors="0.45", linewidth=0.8, linestyles=":")
+            ax.plot(xs, lo, "^", xs, hi, "v", color="0.45", markersize=3)
         ax.set_xticks(range(len(presets)), presets, rotation=15, fontsize=7)
         ax.set_title(f"{scen}: {metric}", fontsize=8)
         ax.tick_params(axis="y", labelsize=7)
         if len(ctrls) > 1:
             ax.legend(fontsize=6)
-    fig.suptitle(f"sweep {name}: mean ± std (bars), min–max (lines)", fontsize=9)
+    fig.suptitle(f"sweep {name}: mean ± std (bars, error bars), min–max (grey triangles)",
+                 fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
