@@ -298,3 +298,83 @@ def test_results_csv_is_plain_csv(tmp_path: Path, spec_file: Path) -> None:
     assert len(rows) == 16
     vals = np.array([float(r["param:compliance.stiffness"]) for r in rows])
     assert np.all(np.isfinite(vals)) and len(set(vals)) > 1
+
+
+# --------------------------------------------------------------- controllers
+
+CTRL_SPEC = """\
+[sweep]
+presets = ["tuttle-joint2"]
+scenarios = ["controllers:ramp"]
+seeds = [0]
+quick = true
+
+[spreads]
+"compliance.stiffness" = 0.3
+
+[scenario."controllers:ramp"]
+quick_duration = 0.3
+
+[[controllers]]
+name = "pid"
+kind = "pid"
+
+[[controllers]]
+name = "dob"
+kind = "pid+dob"
+"""
+
+
+@pytest.mark.skipif(importlib.util.find_spec("controllers") is None,
+                    reason="the controllers package is not importable")
+def test_controllers_meet_the_same_drive(tmp_path: Path) -> None:
+    f = tmp_path / "ctl.toml"
+    f.write_text(CTRL_SPEC)
+    res = run_sweep(f, tmp_path / "out", workers=1, progress=False, summarize=False)
+    assert (res.ran, res.errors) == (2, 0)
+    rows = list(_rows(tmp_path / "out").values())
+    assert {r["controller"] for r in rows} == {"pid", "dob"}
+    assert len({r["param:compliance.stiffness"] for r in rows}) == 1  # common random numbers
+    assert all(0 < float(r["rms_error"]) < 0.1 for r in rows)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(CTRL_SPEC.replace('kind = "pid+dob"', 'kind = "lqr"'))
+    with pytest.raises(ValueError, match=r"bad\.toml, line 19: \[\[controllers\]\] 'dob': kind"):
+        load_spec(bad)
+
+
+def test_benchmark_scenarios_table_is_used_when_present(tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+    import types
+
+    calls = []
+
+    def tracking(params, controller, seed, quick, speed=1.0):  # noqa: ANN001
+        calls.append((controller["name"], seed, quick, speed))
+        return {"rms_error": 1e-3 * speed, "ok": 1}
+
+    fake = types.ModuleType("controllers.benchmark")
+    fake.SCENARIOS = {"tracking": tracking}
+    monkeypatch.setitem(sys.modules, "controllers.benchmark", fake)
+    if "controllers" in sys.modules:
+        monkeypatch.setattr(sys.modules["controllers"], "benchmark", fake, raising=False)
+    assert "controllers:tracking" in scenario_names()
+    f = tmp_path / "bm.toml"
+    f.write_text(textwrap.dedent("""\
+        [sweep]
+        presets = ["tuttle-joint1"]
+        scenarios = ["controllers:tracking"]
+        seeds = 2
+        [scenario."controllers:tracking"]
+        speed = 2.0
+        [[controllers]]
+        name = "a"
+        [[controllers]]
+        name = "b"
+        """))
+    res = run_sweep(f, tmp_path / "out", workers=1, progress=False, summarize=False)
+    assert (res.ran, res.errors) == (4, 0)
+    assert sorted(c[0] for c in calls) == ["a", "a", "b", "b"]
+    # the same seed gives both controllers the same run seed
+    assert len({c[1] for c in calls}) == 2 and all(c[3] == 2.0 for c in calls)
+    assert {r["rms_error"] for r in _rows(tmp_path / "out").values()} == {"0.002"}
