@@ -1,0 +1,195 @@
+"""Tests of the Tuttle reproduction (hdgym.reproduce) and the identification (hdgym.identify)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hdgym import reproduce as R
+from hdgym.identify import MaxwellSlipFit, fit_maxwell_slip, nmse, play_operator, stop_operator
+from hdgym.params import preset
+from hdgym.physics import layout as L
+
+# ------------------------------------------------------------------ pure analysis functions
+
+
+def test_plateau_jump_synthetic() -> None:
+    cur = np.round(np.arange(1.6, 6.01, 0.4), 2)
+    sp = np.array([3000, 3600, 6000, 7900, 8100, 8300, 8500, 8700, 20000, 23000, 26000, 29000.0])
+    res = R.plateau_jump(cur, sp)
+    assert res.ok
+    assert res.plateau == (3, 6)  # 2.8 .. 4.0 A, 7900 .. 8500 (7.6 %)
+    assert res.spread == pytest.approx(8500 / 7900 - 1)
+    assert res.jump == 7 and res.jump_ratio == pytest.approx(20000 / 8700 - 1)
+
+
+def test_plateau_without_jump_and_smooth_growth_has_none() -> None:
+    cur = np.round(np.arange(1.6, 6.01, 0.4), 2)
+    flat = np.array([3000, 3600, 6000, 7900, 8100, 8300, 8500, 8700, 9000, 9300, 9600, 9900.0])
+    res = R.plateau_jump(cur, flat)
+    assert res.plateau is not None and res.jump is None and not res.ok
+    smooth = 2000.0 * cur  # proportional growth: +14 % .. +7 % per step
+    assert R.plateau_jump(cur, smooth).plateau is None
+    assert R.grows_smoothly(smooth)[0]
+    assert not R.grows_smoothly(flat * np.r_[np.ones(6), 1.5 * np.ones(6)])[0]
+    assert R.grows_smoothly(np.array([1.0, 1.35, 1.8, 2.4, 3.1]))[0]  # steep but even
+    assert not R.grows_smoothly(np.r_[1.0, 2.0, 1.9])[0]  # falls
+
+
+def test_plateau_outside_window_is_ignored() -> None:
+    cur = np.round(np.arange(1.6, 6.01, 0.4), 2)
+    sp = np.array([3000, 3050, 3100, 4000, 5000, 6000, 7000, 8000, 9000, 10000, 11000, 12000.0])
+    assert R.plateau_jump(cur, sp).plateau is None  # flat only at 1.6-2.4 A
+
+
+def test_ke_order_spectrum_recovers_lines_and_pp() -> None:
+    ratio = 161.0
+    th = np.linspace(0, 2 * math.pi * 20.3, 60000) + 1e-3 * np.sin(np.linspace(0, 30, 60000))
+    a2, a4 = 3e-4, 1e-4
+    ke = a2 * np.sin(2 * th) + a4 * np.sin(4 * th + 0.3)
+    out = th / ratio - ke + 1e-6 * th  # small drift is detrended away
+    spec = R.ke_order_spectrum(th, out, ratio)
+    assert spec.line(2) == pytest.approx(a2, rel=0.02)
+    assert spec.line(4) == pytest.approx(a4, rel=0.02)
+    assert spec.line(1) < 0.01 * a2
+    g = np.linspace(0, 2 * math.pi, 10000)
+    pp = np.ptp(a2 * np.sin(2 * g) + a4 * np.sin(4 * g + 0.3))
+    assert spec.peak_to_peak == pytest.approx(pp, rel=0.02)
+
+
+def test_ke_order_spectrum_rejects_too_short() -> None:
+    th = np.linspace(0, 3.0, 100)
+    with pytest.raises(ValueError, match="2 WG revolutions"):
+        R.ke_order_spectrum(th, th / 50, 50.0)
+
+
+def test_frequency_response_finds_resonance() -> None:
+    from scipy import signal as sps
+
+    dt, fn, zeta = 1e-3, 44.0, 0.03
+    wn = 2 * math.pi * fn
+    u = np.random.default_rng(0).normal(size=40000)
+    t = np.arange(u.size) * dt
+    y = sps.lsim(([wn**2], [1, 2 * zeta * wn, wn**2]), u, t, interp=False)[1]
+    f, h, coh = R.frequency_response(u, y, dt)
+    assert R.resonance_peak(f, np.abs(h)) == pytest.approx(fn, rel=0.02)
+    assert coh[(f > 10) & (f < 100)].min() > 0.9
+
+
+def test_loop_metrics_hardening_and_hysteresis() -> None:
+    t = np.linspace(0, 2, 4001)
+    x = 1e-3 * np.sin(2 * math.pi * t)
+    fit = MaxwellSlipFit(k1=1e4, k0=0, theta0=0, kappa=(5e3,), strength=(1.0,), nmse=0)
+    torque = fit.predict(x) + 3e9 * x**3
+    lm = R.loop_metrics(x, torque)
+    assert lm.hardening > 1.5
+    assert lm.area > 0 and lm.branch_gap > 0
+    # a purely elastic linear spring: no hardening, no area
+    lin = R.loop_metrics(x, 1e4 * x)
+    assert lin.hardening == pytest.approx(1.0, rel=1e-6)
+    assert abs(lin.area) < 1e-9 and abs(lin.branch_gap) < 1e-6
+
+
+# ------------------------------------------------------------------ identification
+
+
+def test_nmse_definition() -> None:
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    assert nmse(y, y) == 0.0
+    assert nmse(y + 0.5, y) == pytest.approx(100 * 0.25 / np.var(y))
+    with pytest.raises(ValueError):
+        nmse(y, np.ones(4))
+    with pytest.raises(ValueError):
+        nmse(y[:3], y)
+
+
+def test_stop_and_play_operators() -> None:
+    x = np.array([0.0, 1.0, 3.0, 2.0, -2.0, 0.0])
+    s = stop_operator(x, 1.5)
+    np.testing.assert_allclose(s, [0.0, 1.0, 1.5, 0.5, -1.5, 0.5])
+    np.testing.assert_allclose(play_operator(x, 1.5), x - s)
+
+
+def _random_torsion(seed: int, n: int = 12000, amp: float = 0.02) -> np.ndarray:
+    from scipy.signal import butter, filtfilt
+
+    b, a = butter(2, 0.01)
+    s = filtfilt(b, a, np.random.default_rng(seed).normal(size=n))
+    return amp * s / s.std()
+
+
+def test_fit_maxwell_slip_recovers_seed002_model() -> None:
+    # seed 002's WAVE-Drive 50:1 values (PHYSICS.md §2.3)
+    true = MaxwellSlipFit(37.725, 59.863, 1.3e-4, (0.001, 42.002, 102.447, 38.151),
+                          (0.335, 0.018, 0.005, 0.032), 0.0)
+    x, xv = _random_torsion(1), _random_torsion(2)
+    fit = fit_maxwell_slip(x, true.predict(x))
+    assert fit.nmse < 1e-3
+    assert nmse(fit.predict(xv), true.predict(xv)) < 1e-3
+    assert fit.k1 == pytest.approx(37.725, rel=0.01)
+
+
+def test_fit_maxwell_slip_matches_kernel_maxwell_elements() -> None:
+    """The stop-operator model is the kernel's Maxwell-slip element (locked output)."""
+    from hdgym.sim import Simulator
+
+    p = preset("tuttle-joint2").without("kinematic_error", "nonlinear_stiffness")
+    sim = Simulator(p, locked_output=True, sensors=False)
+    t, u, _, st = sim.trajectory("sine:2.0:1.0", 2.0)
+    h = p.hysteresis
+    model = MaxwellSlipFit(p.compliance.stiffness, 0.0, 0.0, h.element_stiffness,
+                           h.element_strength, 0.0)
+    x = st[:, L.TH_M] / p.ratio
+    damp = p.compliance.damping * np.gradient(x, t)
+    assert nmse(model.predict(x) + damp, st[:, L.TK]) < 0.1
+
+
+# ------------------------------------------------------------------ presets through the study
+
+
+def test_step_table_batch_matches_single() -> None:
+    p = preset("tuttle-joint1")
+    both, _ = R.step_table(p, [2.0, 3.2], duration=1.0, average=0.5)
+    one, _ = R.step_table(p, [3.2], duration=1.0, average=0.5)
+    assert both[1] == pytest.approx(one[0], rel=1e-12)
+
+
+def test_joint1_current_steps_plateau_and_model4_smooth() -> None:
+    """(b): Tuttle's plateau near 8,000 deg/s with the tooth friction, none without."""
+    p = preset("tuttle-joint1")
+    cur = np.array(R.STEP_CURRENTS)
+    n = cur.size
+    m, _ = R.step_table([p] * n + [p.without("load_dependent_friction")] * n,
+                        np.concatenate([cur, cur]))
+    m5, m4 = np.degrees(m[:n]), np.degrees(m[n:])
+    res = R.plateau_jump(cur, m5)
+    assert res.ok, m5
+    a, b = res.plateau
+    assert abs(np.mean(m5[a:b + 1]) / 8000.0 - 1) <= 0.25
+    assert R.plateau_jump(cur, m4).plateau is None, m4
+    lo = int(np.searchsorted(cur, 2.8 - 1e-9))
+    assert R.grows_smoothly(m4[lo - 1: res.jump + 2])[0], m4
+
+
+def test_ke_spectrum_of_presets(tmp_path) -> None:
+    """(a) through the same code as the page (quick run)."""
+    item = R.check_ke(tmp_path, quick=True)
+    assert item.passed, item.measured
+    assert (tmp_path / "ke_spectrum.png").exists()
+
+
+def test_resonance_loop_and_identification(tmp_path) -> None:
+    """(c), (d), (e) quick runs pass."""
+    for check in (R.check_resonance, R.check_loop, R.check_identification):
+        item = check(tmp_path, quick=True)
+        assert item.passed, item.measured
+
+
+@pytest.mark.slow
+def test_tuttle_page(tmp_path) -> None:
+    ok = R.tuttle(tmp_path, quick=True)
+    text = (tmp_path / "fidelity.md").read_text()
+    assert "hdgym reproduce tuttle" in text
+    assert ok, text
