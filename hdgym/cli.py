@@ -123,7 +123,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from hdgym.sweep import run_sweep
 
     run_sweep(Path(args.spec), Path(args.out), backend=args.backend, address=args.address,
-              workers=args.workers)
+              workers=args.workers, quick=True if args.quick else None)
     return 0
 
 
@@ -195,6 +195,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--backend", choices=["local", "ray"], default="local")
     sp.add_argument("--address", default=None)
     sp.add_argument("--workers", type=int, default=None)
+    sp.add_argument("--quick", action="store_true", help="shorten every job")
     sp.set_defaults(fn=cmd_sweep)
     return ap
 
