@@ -308,6 +308,10 @@ def test_unknown_names_raise():
         make(IDS[0], reference="zigzag")
     with pytest.raises(ValueError, match="spread"):
         make(IDS[0], randomize={"compliance.stiffness": 1.5})
+    with pytest.raises(ValueError, match="cannot be randomized"):
+        make(IDS[0], randomize={"kinematic_error.order": 0.1})
+    with pytest.raises(ValueError, match="motor_countz"):
+        make(IDS[0], sensors={"motor_countz": 10})
 
 
 def test_randomize_slow_path_and_tuples():

@@ -18,6 +18,7 @@ vector env seeds env ``i`` with ``seed + i``; a single env reset with
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
@@ -44,9 +45,11 @@ INFO_STATES = ("motor_angle", "motor_velocity", "output_angle", "output_velocity
                "motor_current", "output_torque")
 _INFO_COLS = np.array([L.TH_M, L.W_M, L.TH_O, L.W_O, L.CUR, L.TK])
 
-# parameter-row columns that are switches or counts, not physical values
-_NOT_RANDOMIZABLE = ("compliance.model", "hysteresis.model", "hysteresis.n_elements",
-                     "kinematic_error.n_harmonics", "kinematic_error.order")
+# parameter-row columns that are switches, counts or orders, not physical values
+_NOT_RANDOMIZABLE = re.compile(
+    r"(compliance\.model|hysteresis\.model|hysteresis\.n_elements|kinematic_error\.n_harmonics"
+    r"|kinematic_error\.order|friction\.(input|output)\.(n_ripple|ripple\[\d+\]\.(order|frame)))"
+    r"(\[\d+\])?$")
 
 
 def resolve_params(p: str | JointParams | None) -> JointParams:
@@ -92,7 +95,7 @@ class Randomizer:
             if not (0.0 <= spread < 1.0):
                 raise ValueError(f"randomize[{path!r}]: spread must be in [0, 1), got {spread!r}")
             head = path.split(".")[0]
-            if head in ("sensors", "integration") or path in _NOT_RANDOMIZABLE:
+            if head in ("sensors", "integration") or _NOT_RANDOMIZABLE.match(path):
                 raise ValueError(f"randomize: {path!r} cannot be randomized per episode")
             col = path if path != "friction.tooth_mu" else "friction.load_coefficient"
             if col in L.PARAM_INDEX:
@@ -188,8 +191,8 @@ class JointBatch:
             raise ValueError("torque_limit and speed_limit must be > 0")
         c = np.zeros(N_COMMON)
         c[:] = [self.ratio, self.current_limit, self.torque_scale, self.speed_scale,
-                self.torque_limit, self.speed_limit, safety_penalty, sens.torque_noise,
-                sens.current_noise, self.horizon]
+                self.torque_limit, self.speed_limit, safety_penalty,
+                sens.torque_noise if sens.torque_sensor else 0.0, sens.current_noise, self.horizon]
         self.consts = np.concatenate([c, np.asarray(task.constants(), dtype=float)])
         self.noise = (sens.torque_noise > 0 and sens.torque_sensor) or sens.current_noise > 0
 
