@@ -70,8 +70,8 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
 
     * Truncation at 2000 steps (2 s at 1 ms).
     * Termination: ``|flexspline torque| > torque_limit`` (default
-      8 ``K_t I_max ratio``, 371 N m on tuttle-joint1, where a full-current
-      run through the resonance peaks near 310 N m), ``|motor speed| > speed_limit`` (default
+      8 ``K_t I_max ratio``; a full-current run up through the resonance
+      on tuttle-joint1 peaks at about 85 % of it), ``|motor speed| > speed_limit`` (default
       1.5 ``V/K_b``) or a diverging simulation.
 
     ## Arguments
