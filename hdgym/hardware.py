@@ -75,8 +75,11 @@ class SensorBank:
         self.torque_noise = torque_noise
         self.current_noise = current_noise
         self.delay = delay
+        # precomputed so a reading costs a handful of array operations, no allocation
+        self._steps = 2.0 * math.pi / np.stack([self.motor_counts, self.output_counts])
         self._prev = np.zeros((2, n))
         self._held = np.zeros((len(CHANNELS), n))
+        self._buf = np.zeros((len(CHANNELS), n))
 
     @classmethod
     def from_params(cls, n: int, sensors: object, dt: float, rng: np.random.Generator,
@@ -88,13 +91,14 @@ class SensorBank:
                    sensors.torque_sensor, sensors.torque_noise, sensors.current_noise,
                    sensors.delay)
 
-    def _raw(self, xs: np.ndarray) -> np.ndarray:
-        out = np.empty((len(CHANNELS), self.n))
-        out[0] = quantize(xs[:, L.TH_M], self.motor_counts)
-        out[1] = quantize(xs[:, L.TH_O], self.output_counts)
-        out[2] = (out[0] - self._prev[0]) / self.dt
-        out[3] = (out[1] - self._prev[1]) / self.dt
-        self._prev[:] = out[:2]
+    def _raw(self, xs: np.ndarray, out: np.ndarray) -> np.ndarray:
+        angles = out[:2]
+        np.divide(xs[:, [L.TH_M, L.TH_O]].T, self._steps, out=angles)
+        np.floor(angles, out=angles)
+        angles *= self._steps
+        np.subtract(angles, self._prev, out=out[2:4])
+        out[2:4] /= self.dt
+        self._prev[:] = angles
         out[4] = xs[:, L.TK] if self.torque_sensor else 0.0
         out[5] = xs[:, L.CUR]
         if self.torque_noise > 0 and self.torque_sensor:
@@ -110,8 +114,7 @@ class SensorBank:
         """
         mask = np.ones(self.n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         reading = np.zeros((len(CHANNELS), self.n))
-        reading[0] = quantize(xs[:, L.TH_M], self.motor_counts)
-        reading[1] = quantize(xs[:, L.TH_O], self.output_counts)
+        reading[:2] = np.floor(xs[:, [L.TH_M, L.TH_O]].T / self._steps) * self._steps
         reading[4] = xs[:, L.TK] if self.torque_sensor else 0.0
         reading[5] = xs[:, L.CUR]
         self._prev[:, mask] = reading[:2, mask]
@@ -119,10 +122,12 @@ class SensorBank:
         return reading
 
     def measure(self, xs: np.ndarray) -> np.ndarray:
-        """Read all channels for states ``xs (n, N_STATE)``: array ``(len(CHANNELS), n)``."""
-        raw = self._raw(xs)
+        """Read all channels for states ``xs (n, N_STATE)``: array ``(len(CHANNELS), n)``.
+
+        The returned array is a fresh copy the caller may keep.
+        """
         if self.delay == 0:
-            return raw
-        out = self._held
-        self._held = raw
+            return self._raw(xs, self._buf).copy()
+        out = self._held.copy()
+        self._raw(xs, self._held)
         return out
