@@ -4,7 +4,9 @@ A config is a TOML file (see ``agents/configs/``) with the tables
 
 * ``[env]``: ``id``, ``max_episode_steps``, ``action_repeat`` (control
   periods per agent decision; the action is held, the rewards averaged)
-  and ``[env.kwargs]`` passed to ``gym.make`` (SI units, e.g.
+  optionally ``[env.torque_penalty]`` (``weight``, ``threshold`` in N m:
+  agent-side reward shaping, see :class:`TorquePenalty`) and
+  ``[env.kwargs]`` passed to ``gym.make`` (SI units, e.g.
   ``target_speed`` in rad/s, ``[env.kwargs.randomize]`` relative spreads
   per dotted parameter path);
 * ``[train]``: ``algo`` (``ppo`` or ``sac``), ``total_timesteps``,
@@ -109,15 +111,41 @@ class ActionRepeat(gym.Wrapper):
         return obs, total / count, term, trunc, info
 
 
+class TorquePenalty(gym.Wrapper):
+    """Reward shaping on the peak flexspline torque (training only).
+
+    Each control period subtracts ``weight * max(0, |T_k| / threshold - 1)^2``
+    (true flexspline torque from ``info``). The env's own oscillation cost
+    saturates at twice its torque scale, so it cannot tell a 150 N m peak
+    from a 300 N m one; this term can.
+    """
+
+    def __init__(self, env: gym.Env, weight: float, threshold: float) -> None:
+        super().__init__(env)
+        if not (weight >= 0 and threshold > 0):
+            raise ValueError(f"torque_penalty needs weight >= 0 and threshold > 0 N m, got "
+                             f"{weight!r}, {threshold!r}")
+        self.weight = float(weight)
+        self.threshold = float(threshold)
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, r, term, trunc, info = self.env.step(action)
+        excess = max(0.0, abs(float(info["output_torque"])) / self.threshold - 1.0)
+        return obs, float(r) - self.weight * excess * excess, term, trunc, info
+
+
 def make_env(cfg: Mapping[str, Any], monitor_file: str | None = None,
              extra_kwargs: Mapping[str, Any] | None = None) -> gym.Env:
-    """One wrapped env of a config (TimeLimit, ActionRepeat, SB3 Monitor)."""
+    """One wrapped env of a config (TimeLimit, TorquePenalty, ActionRepeat, SB3 Monitor)."""
     from stable_baselines3.common.monitor import Monitor
 
     e = cfg["env"]
     kw = env_kwargs(cfg)
     kw.update(extra_kwargs or {})
     env = gym.make(e["id"], max_episode_steps=int(e["max_episode_steps"]), **kw)
+    tp = e.get("torque_penalty")
+    if tp:
+        env = TorquePenalty(env, float(tp.get("weight", 0.0)), float(tp.get("threshold", 1.0)))
     if int(e["action_repeat"]) > 1:
         env = ActionRepeat(env, int(e["action_repeat"]))
     return Monitor(env, filename=monitor_file)
