@@ -1,0 +1,321 @@
+"""Name, add, refit, repeat: find the physical effects a model misses.
+
+1. Fit the given base model to the record (:func:`.fitting.fit` over the
+   core parameters and those of every effect that is on) and localize the
+   residual (:func:`.residuals.localize`).
+2. Rank every effect that is off (and that the record can show) by how much
+   of the residual it explains, two ways: the effect's signature regressors
+   (:func:`.residuals.signature`) and its simulated sensitivity (switch it on
+   at the registry's guess, take the change of the channels and their
+   derivatives in its parameters, regress the residual on them).
+3. Trial-refit the :data:`TOP_K` best, keep the one that lowers the cost
+   most, and add it if the relative improvement is at least
+   :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
+   percentage points). Repeat until no candidate passes; then say that
+   nothing (more) is missing rather than invent an effect.
+
+NMSE (seed 002, percent) is reported before (base model fitted), after each
+step and on a validation record when one is given.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hdgym.params import JointParams
+from hdgym.record import Record, read_record
+from hdgym.sim import SimulationError
+
+from . import residuals as R
+from .fitting import FitResult, Problem, fit
+from .registry import REGISTRY, get_value, model_params
+
+THRESHOLD = 0.25
+"""Least relative cost reduction (25 %) for an effect to be added."""
+MIN_GAIN = 0.005
+"""Least drop of the mean NMSE, percentage points, for an effect to be added."""
+MIN_SCORE = 0.03
+"""Least share of the residual a linearized refit must explain for a trial refit."""
+TOP_K = 3
+MAX_STEPS = 4
+
+
+@dataclass
+class Step:
+    """One effect added: why, what was fitted, and the NMSE after it."""
+
+    name: str
+    evidence: dict
+    values: dict[str, float]
+    nmse: dict[str, float]
+    nmse_validation: dict[str, float] | None
+    relative_improvement: float
+    candidates: list[dict]
+    params: JointParams = field(repr=False)
+
+
+@dataclass
+class Diagnosis:
+    """Everything :func:`diagnose` found (turned into report.json / report.md by :mod:`.report`)."""
+
+    source: str
+    mode: str
+    channels: tuple[str, ...]
+    base_effects: tuple[str, ...]
+    nmse_given: dict[str, float]
+    before: FitResult
+    steps: list[Step]
+    after: FitResult
+    where_before: dict
+    where_after: dict
+    final_candidates: list[dict]
+    conclusion: str
+    nmse_given_validation: dict[str, float] | None = None
+    nmse_before_validation: dict[str, float] | None = None
+    nmse_after_validation: dict[str, float] | None = None
+    validation_source: str | None = None
+    untestable: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    problem: Problem | None = field(default=None, repr=False)
+    validation: Problem | None = field(default=None, repr=False)
+
+    @property
+    def missing_effects(self) -> list[str]:
+        return [s.name for s in self.steps]
+
+    @property
+    def nmse_before(self) -> float:
+        v = self.nmse_before_validation if self.nmse_before_validation else self.before.nmse
+        return v["mean"]
+
+    @property
+    def nmse_after(self) -> float:
+        v = self.nmse_after_validation if self.nmse_after_validation else self.after.nmse
+        return v["mean"]
+
+
+def _weighted(problem: Problem, res: dict[str, np.ndarray]) -> tuple[dict, dict]:
+    w = {k: 1.0 / (problem.sigma2[k] * max(r.size, 1)) for k, r in res.items()}
+    return res, w
+
+
+def _stack(problem: Problem, d: dict[str, np.ndarray]) -> np.ndarray:
+    return np.concatenate([d[k] / math.sqrt(problem.sigma2[k] * d[k].size) for k in problem.names])
+
+
+def _columns(problem: Problem, p: JointParams, fps, ref: np.ndarray) -> list[np.ndarray]:
+    """Finite-difference columns of the stacked residual in each of ``fps`` (5 % of range)."""
+    cols = []
+    for fp in fps:
+        v = get_value(p, fp.path)
+        h = 0.05 * (fp.upper - fp.lower) or 1e-9
+        h = h if v + h <= fp.upper else -h
+        try:
+            cols.append(_stack(problem, problem.residuals(_set(p, fp.path, v + h))) - ref)
+        except (SimulationError, ValueError):
+            continue
+    return cols
+
+
+def _set(p: JointParams, path: str, value: float) -> JointParams:
+    from .registry import set_values
+
+    return set_values(p, {path: value})
+
+
+def rank_candidates(problem: Problem, current: JointParams) -> list[dict]:
+    """Every effect that is off, testable and whose requirements are on, scored two ways.
+
+    ``signature_explained``: fraction of the residual energy the effect's
+    signature regressors explain (linear regression per channel).
+    ``sensitivity_explained``: fraction a linearized refit explains, i.e. a
+    Gauss-Newton step over the base parameters plus the candidate switched
+    on at the registry's data-based guess and its own parameters; the base
+    columns alone explain next to nothing at the base optimum, so the
+    difference is what the candidate adds. Candidates are ranked by the
+    sensitivity score (the signature score breaks ties and is reported as
+    evidence).
+    """
+    res = problem.residuals(current)
+    r0 = _stack(problem, res)
+    _, w = _weighted(problem, res)
+    ctx = problem.masked_context()
+    base_cols = _columns(problem, current, model_params(current, problem.scales), r0)
+    base_frac = R._lstsq_explained(-r0, np.column_stack(base_cols))[0] if base_cols else 0.0
+    out = []
+    for name, eff in REGISTRY.items():
+        if name in current.effects or not eff.testable(problem.scales):
+            continue
+        if any(req not in current.effects for req in eff.requires):
+            continue
+        sig = R.signature(eff.signature, res, w, ctx)
+        sens = 0.0
+        try:
+            q = eff.switch_on(current, problem.scales)
+            on = _stack(problem, problem.residuals(q))
+            cols = base_cols + [on - r0] + _columns(problem, q, eff.fit_params(q, problem.scales),
+                                                    on)
+            sens = max(R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac, 0.0)
+        except (SimulationError, ValueError):
+            pass
+        out.append({"name": name, "signature": eff.signature,
+                    "signature_explained": round(sig["explained"], 4),
+                    "sensitivity_explained": round(sens, 4),
+                    "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig})
+    out.sort(key=lambda c: -c["score"])
+    return out
+
+
+def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
+    """Switch ``name`` on and scale its own parameters (x 0.1 .. 10) to the cheapest start."""
+    from .registry import set_values
+
+    eff = REGISTRY[name]
+    q = eff.switch_on(p, problem.scales)
+    fps = eff.fit_params(q, problem.scales)
+    best, best_cost = q, problem.nmse(q)["mean"]
+    for f in (0.1, 0.3, 3.0, 10.0):
+        vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in fps
+                if not fp.path.endswith("stribeck_velocity")}
+        try:
+            qq = set_values(q, vals)
+        except ValueError:
+            continue
+        c = problem.nmse(qq)["mean"]
+        if c < best_cost:
+            best, best_cost = qq, c
+    return best
+
+
+def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
+    return None if vp is None else vp.nmse(p)
+
+
+def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
+             mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
+             quick: bool = False, cutoff: float | None = None) -> Diagnosis:
+    """Compare ``params`` with ``record``, find, name and add the missing effects.
+
+    Args:
+        record: the measured run.
+        params: the base model (its ``effects`` are the ones assumed present).
+        validate: a second record of the same drive to report NMSE on.
+        mode: ``simulate``, ``inverse`` or ``auto`` (see :class:`.fitting.Problem`).
+        threshold: least relative cost reduction for adding an effect.
+        max_steps: most effects added.
+        quick: fewer least-squares iterations.
+        cutoff: filter cutoff, Hz (default a twentieth of the sample rate).
+    """
+    t0 = _time.perf_counter()
+    problem = Problem(record, params, mode=mode, cutoff=cutoff)
+    vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names)
+             if validate is not None else None)
+    nfev_base, nfev_trial, nfev_polish = (20, 10, 20) if quick else (40, 15, 30)
+    untestable = [n for n, e in REGISTRY.items() if not e.testable(problem.scales)]
+
+    given = problem.nmse(params)
+    before = fit(problem, params, model_params(params, problem.scales), max_nfev=nfev_base)
+    current = before
+    steps: list[Step] = []
+    conclusion = ""
+    candidates: list[dict] = []
+    for _ in range(max_steps):
+        # control refit: the same iteration budget without a new effect, so a candidate is
+        # credited only with what the effect adds, not with a longer optimization
+        control = fit(problem, current.params, model_params(current.params, problem.scales),
+                      max_nfev=nfev_trial)
+        if control.cost < current.cost:
+            current = FitResult(control.params, {**current.values, **control.values},
+                                control.nmse, control.nfev, control.cost)
+            if not steps:
+                before = current
+        candidates = rank_candidates(problem, current.params)
+        if not candidates:
+            conclusion = "every testable effect is already in the model"
+            break
+        trials = []
+        top = candidates[0]["score"]
+        if top < MIN_SCORE:
+            conclusion = (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
+                          f"% of the residual in a linearized refit (best: "
+                          f"{candidates[0]['name']}, {100 * top:.1f} %)")
+            break
+        for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
+            q = _start(problem, current.params, cand["name"])
+            res = fit(problem, q, model_params(q, problem.scales), max_nfev=nfev_trial)
+            rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
+            cand["trial_nmse"] = res.nmse["mean"]
+            cand["relative_improvement"] = rel
+            trials.append((res.cost, cand, res))
+        trials.sort(key=lambda t: t[0])
+        cost, best, res = trials[0]
+        rel = best["relative_improvement"]
+        gain = current.nmse["mean"] - res.nmse["mean"]
+        if rel < threshold or gain < MIN_GAIN:
+            conclusion = (f"nothing (more) worth adding: the best candidate, {best['name']}, "
+                          f"would cut the cost by {100 * rel:.1f} % (threshold "
+                          f"{100 * threshold:.0f} %) and the mean NMSE by {gain:.3g} points "
+                          f"(threshold {MIN_GAIN:g})")
+            break
+        polished = fit(problem, res.params, model_params(res.params, problem.scales),
+                       max_nfev=nfev_polish)
+        if polished.cost > res.cost:
+            polished = res
+        eff = REGISTRY[best["name"]]
+        values = {fp.path: get_value(polished.params, fp.path)
+                  for fp in eff.fit_params(polished.params, problem.scales)}
+        evidence = {"signature": best["signature"], "detail": best["detail"],
+                    "signature_explained": best["signature_explained"],
+                    "sensitivity_explained": best["sensitivity_explained"],
+                    "relative_improvement": round(rel, 4)}
+        steps.append(Step(best["name"], evidence, values, polished.nmse,
+                          _validate_nmse(vprob, polished.params),
+                          (current.cost - polished.cost) / current.cost, candidates,
+                          polished.params))
+        current = polished
+    else:
+        conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
+    where_before = _where(problem, before.params)
+    if steps and not conclusion.startswith("stopped"):
+        conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
+    return Diagnosis(
+        source=record.source, mode=problem.mode, channels=problem.names,
+        base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
+        after=current, where_before=where_before, where_after=_where(problem, current.params),
+        final_candidates=candidates, conclusion=conclusion,
+        nmse_given_validation=_validate_nmse(vprob, params),
+        nmse_before_validation=_validate_nmse(vprob, before.params),
+        nmse_after_validation=_validate_nmse(vprob, current.params),
+        validation_source=None if validate is None else validate.source,
+        untestable=untestable, seconds=_time.perf_counter() - t0, problem=problem,
+        validation=vprob)
+
+
+def _where(problem: Problem, p: JointParams) -> dict:
+    res = problem.residuals(p)
+    _, w = _weighted(problem, res)
+    return R.localize(res, w, problem.masked_context())
+
+
+def diagnose_files(record_path: str | os.PathLike[str], params: JointParams, out: Path,
+                   validate: str | os.PathLike[str] | None = None, **kwargs) -> dict:
+    """Read the record(s), diagnose, write ``out/report.json`` + ``report.md`` + figures.
+
+    A bad record raises its :class:`hdgym.record.RecordError` unchanged, before
+    anything is written (no report directory is left behind).
+
+    Returns:
+        the report.json content.
+    """
+    from .report import write_report
+
+    rec = read_record(record_path)
+    val = read_record(validate) if validate is not None else None
+    diag = diagnose(rec, params, val, **kwargs)
+    return write_report(diag, Path(out))

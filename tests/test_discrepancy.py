@@ -1,0 +1,268 @@
+"""Discrepancy workflow: registry, experiments, hidden-effect cases, reports, bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hdgym.discrepancy import cases, experiments
+from hdgym.discrepancy.registry import REGISTRY, Scales, get_value, model_params, set_values
+from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
+from hdgym.discrepancy.workflow import diagnose, diagnose_files
+from hdgym.effects import EFFECTS
+from hdgym.record import Record, RecordError
+
+REAL = Path("/work/shared/real-data/harivin-zxf17")
+SCALES = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=2.0, current_measured=2.0,
+                voltage=20.0, transmission_error=1e-4,
+                ke=((2.0, 2e-4, 1e-4),), ripple=((1.0, 0.1, 0.0),))
+
+
+# ---------------------------------------------------------------- registry
+
+
+def test_registry_covers_the_vocabulary():
+    assert set(REGISTRY) == set(EFFECTS)
+
+
+@pytest.mark.parametrize("name", EFFECTS)
+def test_switch_on_neutral_and_fit_paths(name):
+    p = cases.case_joint().without(*EFFECTS).with_effects("coulomb_friction")
+    eff = REGISTRY[name]
+    q = eff.switch_on(p, SCALES)
+    assert name in q.effects and all(r in q.effects for r in eff.requires)
+    fps = eff.fit_params(q, SCALES)
+    assert fps, f"{name} fits no parameters"
+    for fp in fps:
+        v = get_value(q, fp.path)
+        assert fp.lower <= v <= fp.upper, (fp, v)
+        # every path can be set at both bounds (validated joint comes back)
+        set_values(q, {fp.path: fp.lower})
+        set_values(q, {fp.path: fp.upper})
+    n = eff.neutral(q)
+    assert n.effects == q.effects
+
+
+def test_virtual_paths_round_trip():
+    p = cases.case_joint()
+    q = set_values(p, {"kinematic_error.harmonics[0].sin": 1e-4,
+                       "kinematic_error.harmonics[0].cos": -2e-4,
+                       "friction.output.breakaway_excess": 0.7,
+                       "friction.output.coulomb": 1.0})
+    h = q.kinematic_error.harmonics[0]
+    assert h.amplitude == pytest.approx(math.hypot(1e-4, 2e-4))
+    assert get_value(q, "kinematic_error.harmonics[0].cos") == pytest.approx(-2e-4)
+    assert q.friction.output.breakaway == pytest.approx(1.7)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        get_value(p, "friction.nowhere")
+
+
+def test_model_params_follow_effects_and_record_kind():
+    p = cases.case_joint()
+    free = {fp.path for fp in model_params(p, SCALES)}
+    assert "friction.output.coulomb" in free and "load.inertia" in free
+    locked = {fp.path for fp in model_params(p, Scales(**{**SCALES.__dict__, "locked": True}))}
+    assert "friction.output.coulomb" not in locked and "load.inertia" not in locked
+
+
+# ---------------------------------------------------------------- residuals
+
+
+def test_nmse_is_the_seed_002_definition():
+    y = np.sin(np.linspace(0, 10, 500))
+    y_hat = y + 0.1
+    assert nmse(y_hat, y) == pytest.approx(100 * 0.01 / np.var(y))
+    assert nmse(y, y) == 0.0
+
+
+def test_order_spectrum_finds_the_order():
+    th = np.linspace(0, 40 * np.pi, 8000)
+    o, a = order_spectrum(0.3 * np.sin(2 * th + 0.4) + 0.1 * np.sin(4 * th), th)
+    assert o[np.argmax(a)] == pytest.approx(2.0, abs=0.1)
+    assert a.max() == pytest.approx(0.3, rel=0.1)
+
+
+def test_lowpass_is_zero_phase():
+    t = np.arange(4000) * 1e-3
+    x = np.sin(2 * np.pi * 3 * t)
+    y = lowpass(x, 1e-3, 50.0)
+    assert np.max(np.abs(y - x)[200:-200]) < 1e-3
+
+
+# ---------------------------------------------------------------- experiments
+
+
+@pytest.mark.parametrize("name", list(experiments.PROTOCOLS))
+def test_experiments_are_command_records(name):
+    p = cases.case_joint()
+    rec = experiments.generate(name, p, duration=1.0, seed=3)
+    assert rec.has("current_command") and rec.has("time")
+    assert rec.meta["protocol"] == name
+    assert rec.meta["locked_output"] == ("true" if experiments.PROTOCOLS[name]["locked"]
+                                         else "false")
+    assert abs(rec.duration - 1.0) < 2e-3
+    assert np.max(np.abs(rec.current_command)) <= p.amplifier.current_limit
+    other = experiments.generate(name, p, duration=1.0, seed=4)
+    assert not np.array_equal(rec.current_command, other.current_command)
+
+
+def test_unknown_experiment_is_named():
+    with pytest.raises(ValueError, match="unknown protocol 'spin'"):
+        experiments.generate("spin", cases.case_joint())
+
+
+# ---------------------------------------------------------------- hidden effects
+
+FAST_DURATION = 2.0
+
+
+def _run(case: cases.Case, duration: float = FAST_DURATION) -> cases.CaseResult:
+    return cases.run_case(cases.Case(case.name, case.hidden, case.protocol, duration), quick=True)
+
+
+@pytest.mark.parametrize("name", EFFECTS)
+def test_hidden_effect_is_named_first_and_closes_the_gap(name):
+    case = cases.Case(name, (name,), cases.PROTOCOL_OF[name])
+    r = _run(case)
+    d = r.diagnosis
+    assert r.found and r.found[0] == name, (r.found, d.conclusion)
+    assert d.nmse_after <= 0.2 * d.nmse_before, (d.nmse_before, d.nmse_after)
+
+
+def test_nothing_hidden_reports_nothing():
+    r = _run(cases.Case("none", (), "current_steps"))
+    assert r.found == [], r.diagnosis.conclusion
+    assert "nothing" in r.diagnosis.conclusion
+
+
+@pytest.mark.slow
+def test_two_hidden_effects_are_both_found():
+    for case in cases.all_cases():
+        if len(case.hidden) == 2:
+            r = cases.run_case(case, quick=True)
+            assert set(r.found[:2]) == set(case.hidden), (case.name, r.found)
+
+
+@pytest.mark.slow
+def test_full_sweep_passes(tmp_path):
+    assert cases.main(["--quick", "--out", str(tmp_path / "discrepancy.md")]) == 0
+    text = (tmp_path / "discrepancy.md").read_text()
+    assert "python -m hdgym.discrepancy.cases --quick" in text
+
+
+# ---------------------------------------------------------------- files, report, bad input
+
+
+def _small_record(tmp_path: Path) -> tuple[Path, Path]:
+    case = cases.Case("viscous_friction", ("viscous_friction",), "current_steps", 1.5)
+    truth = cases.truth_for(case)
+    train, val = cases.records(case, truth, 1.5)
+    a, b = tmp_path / "train.csv", tmp_path / "val.csv"
+    train.to_csv(a)
+    val.to_csv(b)
+    return a, b
+
+
+def test_diagnose_files_writes_the_report(tmp_path):
+    a, b = _small_record(tmp_path)
+    case = cases.Case("viscous_friction", ("viscous_friction",), "current_steps")
+    base = cases.base_for(case, cases.truth_for(case))
+    out = tmp_path / "rep"
+    js = diagnose_files(a, base, out=out, validate=b, quick=True)
+    assert (out / "report.md").exists()
+    disk = json.loads((out / "report.json").read_text())
+    for key in ("missing_effects", "nmse_before", "nmse_after", "steps", "where"):
+        assert key in disk
+    assert disk["missing_effects"] == js["missing_effects"]
+    assert disk["nmse_on"] == "validation"
+    for step in disk["steps"]:
+        assert {"name", "evidence", "fitted_parameters", "nmse_after"} <= set(step)
+    for key in ("time_spans", "speed_bands", "orders"):
+        assert key in disk["where"]
+    md = (out / "report.md").read_text()
+    for fig in ("residual_time.png", "order_spectrum.png", "loops.png", "nmse_steps.png"):
+        assert (out / fig).exists() and fig in md
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".rep")]
+
+
+BAD = {
+    "missing column": ("time,current_command,output_angle\n0,0,0\n0.001,0,0\n", "motor_angle"),
+    "text in a number": ("time,current_command,motor_angle,output_angle\n0,0,0,0\n"
+                         "0.001,abc,0,0\n", "row 3, column 'current_command'"),
+    "NaN": ("time,current_command,motor_angle,output_angle\n0,0,0,0\n0.001,0,nan,0\n",
+            "row 3, column 'motor_angle'"),
+    "repeated time": ("time,current_command,motor_angle,output_angle\n0,0,0,0\n0,0,0,0\n",
+                      "row 3, column 'time'"),
+    "backwards time": ("time,current_command,motor_angle,output_angle\n0.001,0,0,0\n"
+                       "0,0,0,0\n", "row 3, column 'time'"),
+    "empty file": ("", "empty"),
+}
+
+
+@pytest.mark.parametrize("what", list(BAD))
+def test_bad_record_error_passes_through_and_leaves_nothing(tmp_path, what):
+    text, expect = BAD[what]
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    out = tmp_path / "report"
+    with pytest.raises(RecordError) as err:
+        diagnose_files(path, cases.case_joint(), out=out)
+    assert str(path) in str(err.value) and expect in str(err.value)
+    assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["bad.csv"]
+
+
+def test_cli_diagnose_bad_input_exits_2(tmp_path, capsys):
+    from hdgym import cli, params
+
+    path = tmp_path / "bad.csv"
+    path.write_text(BAD["NaN"][0])
+    toml = tmp_path / "j.toml"
+    params.save(cases.case_joint(), toml)
+    code = cli.main(["diagnose", str(path), "--params", str(toml), "--out",
+                     str(tmp_path / "rep")])
+    err = capsys.readouterr().err
+    assert code == 2 and "row 3, column 'motor_angle'" in err and err.count("\n") == 1
+    assert not (tmp_path / "rep").exists()
+
+
+def test_failed_report_leaves_previous_report_alone(tmp_path, monkeypatch):
+    from hdgym.discrepancy import report
+
+    a, _ = _small_record(tmp_path)
+    case = cases.Case("viscous_friction", ("viscous_friction",), "current_steps")
+    base = cases.base_for(case, cases.truth_for(case))
+    out = tmp_path / "rep"
+    out.mkdir()
+    (out / "report.json").write_text("{}")
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(report, "_figures", boom)
+    rec = Record.from_csv(a)
+    with pytest.raises(RuntimeError):
+        report.write_report(diagnose(rec, base, quick=True, max_steps=0), out)
+    assert (out / "report.json").read_text() == "{}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep", "train.csv", "val.csv"]
+
+
+# ---------------------------------------------------------------- real data
+
+
+@pytest.mark.skipif(not REAL.exists(), reason="real data not present")
+def test_real_sweep_loads_as_an_si_record():
+    from hdgym.discrepancy.realdata import load_friction_sweep
+
+    path = sorted(REAL.glob("friction_sweep_*.csv"))[0]
+    rec = load_friction_sweep(path)
+    assert rec.meta["licence"] == "MIT" and "harivin" in rec.meta["source"]
+    assert rec.ratio == 50.0
+    np.testing.assert_allclose(rec.motor_angle, 50 * rec.output_angle)
+    assert np.ptp(rec.output_angle) == pytest.approx(math.radians(160), rel=0.1)
+    assert 4e-3 < rec.dt < 6e-3
+    assert 4.5 < float(rec.meta["torque_constant_output"]) < 5.5
