@@ -1,0 +1,251 @@
+"""Controllers: PID law, invalid settings, linear model, and each benchmark improvement (quick)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from controllers import benchmark, scenarios, tuning
+from controllers.adapter import ControllerPolicy
+from controllers.dob import DisturbanceObserver
+from controllers.filters import notch
+from controllers.ke_feedforward import KEFeedforward, KEModel, identify_ke
+from controllers.pid import PID, Cascade, PositionPID
+from controllers.repetitive import RepetitiveController
+from hdgym.params import preset
+
+# control.margin evaluates high-order polynomials far beyond the band of interest
+pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
+
+
+@pytest.fixture(scope="module")
+def cfg() -> dict[str, float]:
+    return benchmark.settings(quick=True)
+
+
+# ------------------------------------------------------------------ PID law
+
+
+def test_pid_limits_and_back_calculation_anti_windup() -> None:
+    def run(mode: str) -> list[float]:
+        pid = PID(2.0, 5.0, dt=0.01, u_min=-1.0, u_max=1.0, anti_windup=mode)
+        out = [pid.update(10.0, 0.0) for _ in range(300)]  # long saturation
+        out += [pid.update(0.0, 0.5) for _ in range(100)]  # then overshoot
+        return out
+
+    for mode in ("back_calculation", "clamping", "none"):
+        assert max(abs(u) for u in run(mode)) <= 1.0
+    # with anti-windup the output leaves saturation at once when the error flips
+    assert run("back_calculation")[301] < 0.0
+    assert run("clamping")[301] < 0.0
+    assert run("none")[301] == 1.0
+
+
+def test_pid_filtered_derivative_and_bumpless_reset() -> None:
+    dt, kd, tf = 1e-3, 0.1, 0.01
+    pid = PID(0.0, 0.0, kd, dt=dt, tf=tf, derivative_on="error")
+    pid.update(0.0, 0.0)
+    first = pid.update(1.0, 0.0)  # unit error step
+    assert first == pytest.approx(kd / (tf + dt))  # finite kick, not kd/dt
+    assert pid.update(1.0, 0.0) == pytest.approx(first * tf / (tf + dt))
+    # derivative on measurement: no kick on a setpoint step
+    pid = PID(1.0, 0.0, kd, dt=dt, tf=tf)
+    pid.update(0.0, 0.0)
+    assert pid.update(1.0, 0.0) == pytest.approx(1.0)
+    # bumpless reset and gain change
+    pid = PID(3.0, 20.0, 0.05, dt=dt)
+    pid.reset(output=0.7, setpoint=1.0, measurement=0.8)
+    assert pid.update(1.0, 0.8) == pytest.approx(0.7 + 20.0 * dt * 0.2 * 0, abs=1e-9)
+    before = pid.update(1.0, 0.8)
+    pid.set_gains(6.0, 40.0, 0.05, setpoint=1.0, measurement=0.8)
+    assert pid.update(1.0, 0.8) == pytest.approx(before + 20.0 * dt * 0.2, rel=0.05)
+
+
+def test_cascade_point_to_point_settles() -> None:
+    p = preset("tuttle-joint1")
+    dt = p.integration.ctrl_dt
+    for feedback, kpos in (("motor", 25.0), ("output", 10.0)):
+        vel = PID(0.5, 10.0, dt=dt, u_min=-6.0, u_max=6.0)  # A per motor rad/s
+        pos = PID(kpos, 0.0, dt=dt)  # motor rad/s per rad
+        ctrl = Cascade(pos, vel, p.ratio, feedback=feedback, velocity_filter_hz=100.0)
+        run = scenarios.closed_loop(p, ctrl, 2.0, scenarios.min_jerk(0.2, 0.1, 0.8))
+        assert np.abs(run.error).max() < 3e-3
+        assert abs(run.error[-1]) < 1e-3
+
+
+# ------------------------------------------------------------------ invalid settings
+
+
+@pytest.mark.parametrize("make, name", [
+    (lambda: PID(-1.0), "kp"),
+    (lambda: PID(1.0, -2.0), "ki"),
+    (lambda: PID(1.0, kd=-0.1), "kd"),
+    (lambda: PID(1.0, dt=0.0), "dt"),
+    (lambda: PID(1.0, u_min=1.0, u_max=-1.0), "u_min"),
+    (lambda: PID(1.0, anti_windup="magic"), "anti_windup"),
+    (lambda: DisturbanceObserver(lambda t, m: 0.0, 1e-4, 0.05, 600.0, 1e-3), "bandwidth_hz"),
+    (lambda: DisturbanceObserver(lambda t, m: 0.0, -1e-4, 0.05, 50.0), "inertia"),
+    (lambda: RepetitiveController(lambda t, m: 0.0, 161.0, (0, 2)), "orders"),
+    (lambda: RepetitiveController(lambda t, m: 0.0, 161.0, (2, -4)), "orders"),
+    (lambda: RepetitiveController(lambda t, m: 0.0, 161.0, (2,), output_orders=(0,)),
+     "output_orders"),
+    (lambda: RepetitiveController(lambda t, m: 0.0, 161.0, (2,), gain=2.5), "gain"),
+    (lambda: RepetitiveController(lambda t, m: 0.0, 161.0, (2,), gain=-0.1), "gain"),
+    (lambda: KEModel(orders=(0.0,), cos=(0.0,), sin=(0.0,)), "orders"),
+    (lambda: notch(600.0, 1e-3), "freq_hz"),
+    (lambda: PositionPID(PID(1.0), -3.0), "ratio"),
+    (lambda: Cascade(PID(1.0), PID(1.0), 161.0, velocity_filter_hz=900.0),
+     "velocity_filter_hz"),
+    (lambda: tuning.design_pid(tuning.output(tuning.linearize(preset("tuttle-joint1")),
+                                             "motor_angle"), 5.0, 95.0), "phase_margin_deg"),
+])
+def test_invalid_settings_name_the_setting(make, name) -> None:
+    with pytest.raises(ValueError, match=name):
+        make()
+
+
+def test_identify_ke_rejects_bad_orders_and_short_records() -> None:
+    class Rec:
+        time = np.arange(1000) * 1e-3
+        motor_angle = np.linspace(0, 3.0, 1000)
+        output_angle = motor_angle / 161.0
+        meta = {"ratio": "161.0"}
+
+    with pytest.raises(ValueError, match="orders"):
+        identify_ke(Rec(), (2, 0))
+    with pytest.raises(ValueError, match="revolutions"):
+        identify_ke(Rec(), (2,))
+
+
+# ------------------------------------------------------------------ tuning
+
+
+@pytest.mark.parametrize("name", ["tuttle-joint1", "tuttle-joint3"])
+def test_linear_model_matches_simulated_response(name: str) -> None:
+    """Bode of the linear model vs H1 through the Simulator, below the resonance: 1 dB, 5 deg."""
+    p = tuning.small_signal_joint(preset(name))
+    sys = tuning.linearize(p)
+    assert sys.noutputs == len(tuning.OUTPUTS) and sys.ninputs == 1
+    fmax = 0.6 * min(tuning.resonance_hz(p),
+                     math.sqrt(tuning.stiffness(p) / p.load.inertia) / (2 * math.pi))
+    for ch in ("motor_velocity", "output_torque"):
+        f, h, _ = tuning.simulated_response(p, ch, duration=40.0)
+        m = tuning.model_response(sys, ch, f, dt=p.integration.ctrl_dt)
+        k = (f >= 1.0) & (f <= fmax)
+        assert k.sum() > 20
+        db = 20 * np.log10(np.abs(h[k]) / np.abs(m[k]))
+        deg = np.degrees(np.angle(h[k] / m[k]))
+        assert np.abs(db).max() < 1.0, (ch, np.abs(db).max())
+        assert np.abs(deg).max() < 5.0, (ch, np.abs(deg).max())
+
+
+def test_design_pid_reaches_phase_margin() -> None:
+    p = preset("tuttle-joint1")
+    plant = tuning.output(tuning.linearize(p), "motor_angle")
+    d = tuning.design_pid(plant, 8.0, 50.0, delay=1e-3)
+    assert d.phase_margin_deg == pytest.approx(50.0, abs=0.5)
+    assert d.crossover_hz == pytest.approx(8.0, rel=0.02)
+    assert d.kp > 0 and d.ki > 0 and d.kd > 0
+    ctrl, design = scenarios.motor_pid(p)
+    assert design.phase_margin_deg >= 44.0 and design.gain_margin_db >= 6.0
+
+
+# ------------------------------------------------------------------ improvements
+
+
+@pytest.fixture(scope="module")
+def tracking(cfg) -> dict[str, dict]:
+    return {name: benchmark.tracking(preset(name), cfg, benchmark.PRIMARY[name])
+            for name in benchmark.JOINTS}
+
+
+@pytest.mark.parametrize("name", benchmark.JOINTS)
+def test_ke_feedforward_from_identified_model(tracking, name: str) -> None:
+    tr = tracking[name]
+    p = preset(name)
+    # the model came from a record; its dominant line matches the drive's
+    amps = tr["model"].amplitudes()
+    true = {h.order * p.transmission.port_factor(h.port): h.amplitude
+            for h in p.kinematic_error.harmonics}
+    dominant = max(true, key=true.get)
+    assert amps[min(amps, key=lambda o: abs(o - dominant))] == pytest.approx(true[dominant],
+                                                                            rel=0.1)
+    assert tr["reduction"]["PID + KE feedforward"] >= benchmark.KE_TARGET
+
+
+@pytest.mark.parametrize("name", benchmark.JOINTS)
+def test_repetitive_control_converges_and_survives_speed_change(tracking, name: str) -> None:
+    tr = tracking[name]
+    assert tr["reduction"]["PID + repetitive"] >= benchmark.RC_TARGET
+    conv = np.array(tr["convergence"])
+    assert conv[-1, 1] < 0.2 * conv[2, 1] or conv[2, 1] < 0.2 * conv[2, 2]  # it learnt
+    sweep = tr["sweep_rms"]
+    assert sweep["PID + repetitive (learnt)"] < 0.5 * sweep["PID"]
+
+
+def test_repetitive_stability_condition_is_checked() -> None:
+    rc = RepetitiveController(lambda t, m: 0.0, 161.0, (2, 4), gain=0.5)
+    assert rc.check_stability(lambda w: 1.0, [1.0, 10.0]) == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="gain"):
+        rc.check_stability(lambda w: -1.0, [1.0])  # 180 deg out of phase: diverges
+
+
+def test_dob_halves_load_step_deviation(cfg) -> None:
+    res = benchmark.load_step(preset("tuttle-joint1"), cfg)
+    m = res["metrics"]
+    assert res["reduction"] >= benchmark.DOB_TARGET
+    assert m["PID + DOB"]["recovery"] < m["PID"]["recovery"]
+
+
+def test_dob_estimates_a_constant_disturbance() -> None:
+    dt, j, kt = 1e-3, 1e-4, 0.05
+    dob = DisturbanceObserver(lambda t, m: 0.0, j, kt, 30.0, dt)
+    th = w = 0.0
+    d = 0.4  # A
+    for _ in range(400):  # free rigid motor pushed by the disturbance only
+        dob.update(th)
+        w += dt * kt * d / j
+        th += dt * w
+    assert dob.update(th) == pytest.approx(d, rel=0.02)
+
+
+# ------------------------------------------------------------------ adapter
+
+
+def test_controller_policy_on_env() -> None:
+    gym = pytest.importorskip("gymnasium")
+    import hdgym  # noqa: F401  (registers the envs)
+
+    env = gym.make("HarmonicDriveJoint-v0", preset="tuttle-joint1", reference="point_to_point")
+    ctrl, _ = scenarios.motor_pid(preset("tuttle-joint1"))
+    policy = ControllerPolicy.from_env(env, ctrl)
+    obs, info = env.reset(seed=3)
+    policy.reset()
+    m = policy.measurement(obs, info)
+    assert m["motor_angle"] == pytest.approx(info["motor_angle"], abs=2e-3)
+    errs = []
+    for _ in range(2000):
+        obs, _, term, trunc, info = env.step(policy(obs, info))
+        errs.append(info["tracking_error"])
+        if term or trunc:
+            break
+    assert not term
+    assert np.max(np.abs(errs[-100:])) < 1e-3
+
+
+def test_ke_feedforward_wraps_reference() -> None:
+    model = KEModel(orders=(2.0,), cos=(0.0,), sin=(1e-4,))
+    seen = {}
+
+    def inner(t, m):
+        seen.update(m)
+        return 0.0
+
+    ff = KEFeedforward(inner, model, 100.0)
+    ff(0.0, {"reference": 0.01, "motor_angle": 1.0, "output_torque": 0.0})
+    # reference + theta_ke at the WG angle that puts the output there (fixed point)
+    assert seen["reference"] == pytest.approx(0.01 + model.scalar(100.0 * seen["reference"]),
+                                              abs=1e-6)
+    assert seen["reference"] - 0.01 == pytest.approx(ff.correction(0.01))
