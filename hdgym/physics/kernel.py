@@ -141,7 +141,9 @@ def _friction_level(p: np.ndarray, base: int, w: float, th_in: float, th_out: fl
             level = p[base + F_FS] if (flags & (STICK | STRIB)) else fc
         elif flags & STRIB:
             r = w / p[base + F_WS]
-            level = fc + (p[base + F_FS] - fc) * math.exp(-r * r)
+            r2 = r * r
+            # exp(-40) < 5e-18: skip the call far above the Stribeck speed
+            level = fc + (p[base + F_FS] - fc) * math.exp(-r2) if r2 < 40.0 else fc
         else:
             level = fc
     if flags & POSDEP:
@@ -281,7 +283,9 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         vis = _viscous_coeff(p, FIN, w_m, flags)
         w_m_new, pm = _advance(w_m, t_m - t_k * gear, jm, vis, lvl, dt)
         # --- output side
-        t_load = p[LOAD_T] + p[GRAV] * math.sin(th_o) + t_ext
+        t_load = p[LOAD_T] + t_ext
+        if p[GRAV] != 0.0:
+            t_load += p[GRAV] * math.sin(th_o)
         if locked:
             w_o_new = 0.0
             po = 0.0
