@@ -20,8 +20,8 @@ Per episode, from the *true* states in ``info``:
 Controllers: ``policy`` (the SB3 model, deterministic), ``pi`` (PI speed
 loop, :mod:`agents.baselines`, limited by the amplifier's current and
 back-EMF limits), ``pi@4A`` (the same PI with its output limited to 4 A,
-e.g. a continuous current rating), ``full`` (constant full current) and
-``const@X`` (constant X times full current).
+e.g. a continuous current rating), ``full`` (constant full current),
+``const@X`` (constant X times full current) and ``const@XA`` (constant X A).
 """
 
 from __future__ import annotations
@@ -82,8 +82,12 @@ def controller_for(name: str, venv: Any, model: Any = None) -> Any:
     if name == "full":
         return ConstantCurrent(1.0)
     if name.startswith("const@"):
-        return ConstantCurrent(float(name[6:]))
-    raise ValueError(f"unknown controller {name!r}; use policy, pi, pi@<A>, full or const@<x>")
+        spec = name[6:]
+        if spec.endswith("A"):  # amps
+            return ConstantCurrent(float(spec[:-1]) / b.current_limit)
+        return ConstantCurrent(float(spec))
+    raise ValueError(f"unknown controller {name!r}; use policy, pi, pi@<A>, full, "
+                     "const@<x> or const@<A>A")
 
 
 def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
@@ -191,10 +195,14 @@ LABELS = {"policy": "PPO policy", "pi": "PI speed loop (amplifier limits)",
 def label(name: str) -> str:
     if name in LABELS:
         return LABELS[name]
+    if name.startswith("policy-"):
+        return f"PPO policy ({name[7:]})"
     if name.startswith("pi@"):
         return f"PI speed loop, output limited to {name[3:].rstrip('A')} A"
     if name.startswith("const@"):
-        return f"constant {name[6:]} x full current"
+        spec = name[6:]
+        return f"constant {spec[:-1]} A" if spec.endswith("A") else \
+            f"constant {spec} x full current"
     return name
 
 
