@@ -42,6 +42,9 @@ class KEModel:
         offset: mean transmission error during identification (wind-up and
             encoder offset), output rad; not part of :meth:`__call__`.
         residual_rms: RMS of the fit residual on the resampled data, output rad.
+        compliance: wind-up per N m of flexspline torque, output rad/(N m),
+            when the fit included the torque-sensor column (else 0); the
+            offset is then the wind-up at zero torque.
     """
 
     orders: tuple[float, ...]
@@ -49,6 +52,7 @@ class KEModel:
     sin: tuple[float, ...]
     offset: float = 0.0
     residual_rms: float = 0.0
+    compliance: float = 0.0
 
     def __post_init__(self) -> None:
         check_orders("orders", self.orders)
@@ -126,7 +130,7 @@ def resample_by_angle(motor_angle: np.ndarray, values: np.ndarray,
 
 def identify_ke(record: Any, orders: tuple[float, ...] | list[float] = (1, 2, 4), *,
                 ratio: float | None = None, samples_per_rev: int = 256,
-                settle: float = 0.0) -> KEModel:
+                settle: float = 0.0, torque: bool = False) -> KEModel:
     """Fit a :class:`KEModel` to a slow constant-speed record.
 
     Args:
@@ -138,6 +142,9 @@ def identify_ke(record: Any, orders: tuple[float, ...] | list[float] = (1, 2, 4)
         ratio: motor angle per output angle (default: ``record.meta["ratio"]``).
         samples_per_rev: resampling grid, points per WG revolution.
         settle: seconds at the start to drop (acceleration transient).
+        torque: also regress on the torque-sensor column ``output_torque``
+            (N m) to separate the wind-up, which follows the slowly varying
+            friction torque, from the kinematic error (sets ``compliance``).
 
     Raises:
         ValueError: on bad orders, a missing ratio, or a record that is too
@@ -156,15 +163,24 @@ def identify_ke(record: Any, orders: tuple[float, ...] | list[float] = (1, 2, 4)
     th_o = np.asarray(record.output_angle, dtype=float)[keep]
     grid, err = resample_by_angle(th_m, th_m / ratio - th_o, samples_per_rev)
     x = (grid - grid[0]) / (grid[-1] - grid[0])
-    cols = [np.ones_like(grid), x]
+    cols = [np.ones_like(grid)] if torque else [np.ones_like(grid), x]
+    if torque:
+        tk = getattr(record, "output_torque", None)
+        if tk is None:
+            raise ValueError("torque: the record has no output_torque column")
+        _, tk_grid = resample_by_angle(th_m, np.asarray(tk, dtype=float)[keep], samples_per_rev)
+        cols.append(tk_grid)
+    n0 = len(cols)
     for n in orders:
         cols += [np.cos(n * grid), np.sin(n * grid)]
     a = np.column_stack(cols)
     coef, *_ = np.linalg.lstsq(a, err, rcond=None)
     resid = err - a @ coef
-    return KEModel(orders=orders, cos=tuple(float(c) for c in coef[2::2]),
-                   sin=tuple(float(c) for c in coef[3::2]), offset=float(coef[0] + 0.5 * coef[1]),
-                   residual_rms=float(np.sqrt(np.mean(resid ** 2))))
+    offset = float(coef[0]) if torque else float(coef[0] + 0.5 * coef[1])
+    return KEModel(orders=orders, cos=tuple(float(c) for c in coef[n0::2]),
+                   sin=tuple(float(c) for c in coef[n0 + 1::2]), offset=offset,
+                   residual_rms=float(np.sqrt(np.mean(resid ** 2))),
+                   compliance=float(coef[1]) if torque else 0.0)
 
 
 class KEFeedforward:
@@ -179,7 +195,10 @@ class KEFeedforward:
 
     * ``offset=True`` also adds the model's ``offset``, the mean transmission
       error of the identification run: the wind-up at that speed and load
-      (valid only near them);
+      (valid only near them). Fit the model with ``torque=False`` for this:
+      feeding the measured torque back through the identified compliance
+      was tried and made tracking worse (the correction moves the motor,
+      which changes the torque it is computed from);
     * ``torque_constant`` (N m/A) adds the current ``-T_k theta_ke'(theta_wg)/K_t``
       that cancels the torque the kinematic error feeds back to the motor
       (power balance, PHYSICS.md §2.1: the motor sees ``T_k (1/ratio -
@@ -226,7 +245,10 @@ class KEFeedforward:
         self.reset_state()
 
     def correction(self, reference: float) -> float:
-        """theta_ke at the WG angle that puts the output at ``reference``, output rad."""
+        """theta_ke at the WG angle that puts the output at ``reference``, output rad.
+
+        With ``offset`` the identified mean wind-up is added.
+        """
         c = 0.0
         for _ in range(2):
             c = self.model.scalar(self.ratio * (reference + c))

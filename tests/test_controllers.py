@@ -119,6 +119,22 @@ def test_identify_ke_rejects_bad_orders_and_short_records() -> None:
         identify_ke(Rec(), (2,))
 
 
+def test_identify_ke_separates_wind_up_with_the_torque_column() -> None:
+    class Rec:
+        time = np.arange(20000) * 1e-3
+        motor_angle = np.linspace(0, 40 * np.pi, 20000)
+        output_torque = 3.0 + np.sin(time / 3.0)  # slowly varying friction, N m
+        output_angle = (motor_angle / 80.0 - 2e-4 * np.sin(2 * motor_angle + 0.3)
+                        - 1e-4 * np.cos(4 * motor_angle) - output_torque / 3000.0)
+        meta = {"ratio": "80"}
+
+    m = identify_ke(Rec(), (2, 4), torque=True)
+    assert m.compliance == pytest.approx(1 / 3000.0, rel=0.02)
+    assert m.amplitudes()[2.0] == pytest.approx(2e-4, rel=0.02)
+    assert m.amplitudes()[4.0] == pytest.approx(1e-4, rel=0.02)
+    assert m.residual_rms < 1e-6
+
+
 # ------------------------------------------------------------------ tuning
 
 
