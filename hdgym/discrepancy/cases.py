@@ -180,13 +180,13 @@ class CaseResult:
         return self.named_first and self.reduction >= 0.8
 
 
-def run_case(case: Case, quick: bool = False) -> CaseResult:
-    """Simulate, diagnose and score one case."""
+def run_case(case: Case, quick: bool = False, **kwargs) -> CaseResult:
+    """Simulate, diagnose and score one case (``kwargs`` go to :func:`diagnose`)."""
     t0 = time.perf_counter()
     truth = truth_for(case)
     train, val = records(case, truth, case.duration)
     base = base_for(case, truth)
-    diag = diagnose(train, base, val, quick=quick)
+    diag = diagnose(train, base, val, quick=quick, **kwargs)
     return CaseResult(case, diag, time.perf_counter() - t0)
 
 

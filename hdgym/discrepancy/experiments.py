@@ -29,8 +29,9 @@ Protocols:
     so the speed rises and falls back through zero every half cycle: the
     Stribeck drop shows while decelerating, where stiction does not act.
 ``breakaway_ramps``
-    free output, slow triangular current ramps in both directions under
-    several external loads: breakaway (static) against running friction.
+    free output, slow current ramps to just past breakaway, a hold, and
+    back to zero, in both directions under several external loads:
+    breakaway (static) against running friction.
 ``loaded_current_steps``
     free output, current steps while an external load torque steps too:
     load-dependent (tooth) friction.
@@ -129,8 +130,15 @@ def command(name: str, p: JointParams, duration: float, seed: int = 0
     if name == "breakaway_ramps":
         nr = 6
         per = n // nr
-        tri = 1.0 - np.abs(np.linspace(-1.0, 1.0, per))
-        peak = 2.5 * ib * (1 + 0.05 * rng.uniform(-1, 1))
+        # slow rise to just past breakaway, a hold (running friction and viscous show),
+        # then back to zero
+        n_up, n_hold = int(0.55 * per), int(0.3 * per)
+        tri = np.concatenate([np.linspace(0.0, 1.0, n_up), np.ones(n_hold),
+                              np.zeros(per - n_up - n_hold)])
+        static = {"stiction", "stribeck_friction"} & set(p.effects)
+        # just past breakaway (a rig stops the ramp once it moves); without a static
+        # friction in the model, assume breakaway up to twice the running friction
+        peak = (1.3 if static else 2.6) * ib * (1 + 0.05 * rng.uniform(-1, 1))
         t_break = ib * p.motor.torque_constant * p.ratio
         loads = [0.0, 0.0, 0.3 * t_break, 0.3 * t_break, -0.3 * t_break, -0.3 * t_break]
         u = np.concatenate([tri * peak * (1 if k % 2 == 0 else -1) for k in range(nr)])

@@ -78,7 +78,9 @@ class Problem:
             seconds, each restarted from the measured angles, speeds and
             current (multiple shooting), so a small speed error cannot grow
             into a position drift that scrambles position-periodic effects
-            (0 or None: one run).
+            (0 or None: one run). Restarts happen only while the measured
+            joint moves (faster than 10 % of its typical speed), so sticking
+            and breakaway stay the model's own.
     """
 
     record: Record
@@ -259,6 +261,8 @@ class Problem:
         qm = 2 * math.pi / mc if mc else 0.0
         self.x_th_m = R.lowpass(self.raw.motor_angle, self.dt, self.cutoff) + qm / 2
         self.x_w_m = np.gradient(self.x_th_m, self.dt)
+        typical = float(np.quantile(np.abs(self.x_w_m), 0.9))
+        self.x_moving = np.abs(self.x_w_m) > 0.1 * typical
         self.x_cur = (R.lowpass(self.raw.motor_current, self.dt, self.cutoff)
                       if self.raw.motor_current is not None else None)
 
@@ -314,6 +318,8 @@ class Problem:
             a = 0
             while a < n:
                 b = min(a + seg, n)
+                while b < n and not self.x_moving[b]:  # never restart a joint at rest
+                    b += 1
                 if n - b < 2:
                     b = n
                 e = min(b + 1, n)

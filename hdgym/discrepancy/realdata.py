@@ -175,18 +175,20 @@ def main(argv: list[str] | None = None) -> int:
     kt_out = float(rec.meta["torque_constant_output"])
     params = zxf17_params(kt_out)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    save(params, out / "zxf17-50.toml")
-    # the two sweep cycles: fit on the first half, validate on the second
+    # the two sweep cycles: fit on the first, validate on the second
     tm = float(rec.time[len(rec) // 2])
     train, val = rec.slice(None, tm), rec.slice(tm, None)
     diag = diagnose(train, params, val, mode="inverse")
     notes = _notes(diag, data, kt_out)
-    write_report(diag, out / "report", notes=notes,
+    notes.append("Base model: zxf17-50.toml in this folder (written by the same command); the "
+                 "data are read from /work/shared/real-data/harivin-zxf17 at run time (MIT "
+                 "licence, LICENSE there), not copied.")
+    write_report(diag, out, notes=notes,
                  title="Discrepancy report: ZXF17-50 friction sweep (real data)",
                  command="python -m hdgym.discrepancy.realdata")
+    save(params, out / "zxf17-50.toml")
     print(f"missing effects: {diag.missing_effects or 'none'}; NMSE "
-          f"{diag.nmse_before:.3g} -> {diag.nmse_after:.3g} %; wrote {out}/report")
+          f"{diag.nmse_before:.3g} -> {diag.nmse_after:.3g} %; wrote {out}/report.md")
     return 0
 
 
@@ -216,10 +218,13 @@ def _notes(diag, data: Path, kt_out: float) -> list[str]:
     if ramps:
         tb = breakaway_torque(ramps[0])
         if tb is not None:
-            notes.append(f"Breakaway ramp file {ramps[0].name}: the output first moved more than "
-                         f"1 deg with the torque ceiling at {tb:.1f} N m (owner: about 10 N m). "
-                         f"That file is not diagnosed (it is a stalled velocity loop, not a "
-                         f"motion record); stiction cannot be tested on the sweep.")
+            notes.append(f"Breakaway ramp file {ramps[0].name} (a different day): the output "
+                         f"first moved more than 1 deg with the torque ceiling at {tb:.1f} N m, "
+                         f"after creeping a few tenths of a degree at the step below; that is "
+                         f"about the running friction of the sweep, not the owner's 'about 10 "
+                         f"N m from rest' (which this file does not show). The file is not "
+                         f"diagnosed (a stalled velocity loop, not a motion record); stiction "
+                         f"cannot be tested on the sweep, whose reversals are masked.")
     notes += [
         "What these records cannot tell: the rotor angle is 50 x the output angle (no separate "
         "input encoder in the sweep), so kinematic error and wind-up are invisible and "

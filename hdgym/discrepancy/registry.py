@@ -257,6 +257,13 @@ def _sides(s: Scales) -> tuple[str, ...]:
     return ("output",) if s.inverse else ("output", "input")
 
 
+def _one_side(s: Scales) -> tuple[str, ...]:
+    """Sides whose static friction is fitted: the motor side when the output is locked, the
+    lumped output side in the rigid (inverse) comparison, else both (the motor breaks away
+    before it winds up the spring enough to break the output loose)."""
+    return _sides(s)
+
+
 def _t_side(p: JointParams, s: Scales, side: str) -> float:
     """Torque scale on a friction side (motor-referred on the input side)."""
     return s.torque if side == "output" else s.torque / p.ratio
@@ -422,7 +429,7 @@ def _visc_neutral(d):
 
 def _strib_params(p, s):
     out = []
-    for side in _sides(s):
+    for side in _one_side(s):
         w = _w_side(p, s, side)
         out += [FitParam(f"friction.{side}.breakaway_excess", 0.0, _t_side(p, s, side)),
                 FitParam(f"friction.{side}.stribeck_velocity", 1e-3 * w, 2.0 * w)]
@@ -431,7 +438,7 @@ def _strib_params(p, s):
 
 def _strib_on(p, s):
     out = {}
-    for side in _sides(s):
+    for side in _one_side(s):
         out[f"friction.{side}.breakaway_excess"] = 0.02 * _t_side(p, s, side)
         out[f"friction.{side}.stribeck_velocity"] = 0.05 * _w_side(p, s, side)
     return out
@@ -439,12 +446,12 @@ def _strib_on(p, s):
 
 def _stick_params(p, s):
     return [FitParam(f"friction.{side}.breakaway_excess", 0.0, _t_side(p, s, side))
-            for side in _sides(s)]
+            for side in _one_side(s)]
 
 
 def _stick_on(p, s):
     return {f"friction.{side}.breakaway_excess": 0.02 * _t_side(p, s, side)
-            for side in _sides(s)}
+            for side in _one_side(s)}
 
 
 def _break_neutral(d):
@@ -552,16 +559,38 @@ def core_params(p: JointParams, s: Scales) -> list[FitParam]:
     return out
 
 
-def model_params(p: JointParams, s: Scales) -> list[FitParam]:
-    """Core parameters plus the fit parameters of every effect that is on (no duplicates)."""
-    out = core_params(p, s)
+ANCHOR_FACTOR = 2.0
+"""Parameters of the given base model are refined within this factor of their given value."""
+
+
+def model_params(p: JointParams, s: Scales, anchor: JointParams | None = None
+                 ) -> list[FitParam]:
+    """Core parameters plus the fit parameters of every effect that is on (no duplicates).
+
+    With ``anchor`` (the base model as given), the core parameters and those of the
+    effects the anchor already has stay within :data:`ANCHOR_FACTOR` of their given
+    (positive) values, so a base fit cannot wander off to mimic a missing effect;
+    the parameters of effects added later keep the registry's data-scaled bounds.
+    """
+    out = core_params(p if anchor is None else anchor, s)
     seen = {fp.path for fp in out}
     for name in p.effects:
         eff = REGISTRY[name]
         if not eff.testable(s):
             continue
+        anchored = anchor is not None and name in anchor.effects
         for fp in eff.fit_params(p, s):
-            if fp.path not in seen:
-                seen.add(fp.path)
-                out.append(fp)
+            if fp.path in seen:
+                continue
+            seen.add(fp.path)
+            if anchored and not fp.path.endswith((".sin", ".cos")):
+                try:
+                    v0 = get_value(anchor, fp.path)
+                except ValueError:
+                    v0 = 0.0
+                if v0 > 0:
+                    lo, hi = v0 / ANCHOR_FACTOR, v0 * ANCHOR_FACTOR
+                    v = get_value(p, fp.path)
+                    fp = FitParam(fp.path, min(lo, v), max(hi, v), fp.guess)
+            out.append(fp)
     return out

@@ -113,17 +113,19 @@ def _figures(diag: Diagnosis, d: Path) -> list[str]:
     plt.close(fig)
     made.append("residual_time.png")
     # order spectrum
-    th = pr.context.theta_m if pr.mask is None else pr.context.theta_m[pr.mask]
+    mctx = pr.masked_context()
+    th, sp = mctx.theta_m, mctx.speed
     fig, ax = plt.subplots(figsize=(8, 3))
     drawn = False
     for ch in pr.names:
         for lab, res in (("before", before), ("after", after)):
-            o, a = R.order_spectrum(res[ch] / math.sqrt(pr.sigma2[ch]), th)
+            o, a = R.order_spectrum(res[ch] / math.sqrt(pr.sigma2[ch]), th, speed=sp)
             if o.size:
                 ax.plot(o, a, lw=0.9, label=f"{ch} {lab}")
                 drawn = True
     if drawn:
-        ax.set_xlabel("order of the WG angle [cycles per WG revolution]")
+        ax.set_xlabel("order of the WG angle [cycles per WG revolution] (each direction "
+                      "on its own, averaged)")
         ax.set_ylabel("amplitude / sigma of channel")
         ax.legend(fontsize=7)
     else:

@@ -275,12 +275,28 @@ SIGNATURES: dict[str, Callable] = {k: signature for k in (
 
 
 def order_spectrum(r: np.ndarray, theta_m: np.ndarray, max_order: float = 10.0,
-                   step: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   speed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude of ``r`` at orders of the WG angle (resampled to equal angle, FFT).
+
+    With ``speed``, each direction of rotation is analysed on its own (a
+    friction ripple flips sign with the direction, so mixing both would
+    cancel it) and the amplitudes are averaged, weighted by sample count.
 
     Returns ``(orders, amplitudes)``; empty when the WG turned less than two
     revolutions one way.
     """
+    if speed is not None:
+        parts = []
+        for sel in (speed > 0, speed < 0):
+            if sel.sum() > 64:
+                o, a = order_spectrum(r[sel], theta_m[sel], max_order)
+                if o.size:
+                    parts.append((o, a, int(sel.sum())))
+        if not parts:
+            return np.zeros(0), np.zeros(0)
+        o = parts[0][0]
+        tot = sum(n for _, _, n in parts)
+        return o, sum(np.interp(o, oo, aa) * n for oo, aa, n in parts) / tot
     th = np.asarray(theta_m, dtype=float)
     span = float(th.max() - th.min())
     if span < 4 * math.pi:
@@ -350,11 +366,17 @@ def localize(residuals: Mapping[str, np.ndarray], weights: Mapping[str, float],
     out["torsion_regions"] = _bands(c.torsion, e) if c.torsion is not None else []
     orders = []
     for ch, r in residuals.items():
-        o, a = order_spectrum(r, c.theta_m)
+        o, a = order_spectrum(r, c.theta_m, speed=c.speed)
         if o.size:
             sel = (o > 0.5)
             o, a = o[sel], a[sel]
-            for k in np.argsort(a)[::-1][:3]:
+            picked: list[float] = []
+            for k in np.argsort(a)[::-1]:
+                if len(picked) == 3:
+                    break
+                if any(abs(o[k] - q) < 0.3 for q in picked):  # same line, next bin
+                    continue
+                picked.append(float(o[k]))
                 orders.append({"channel": ch, "order": round(float(o[k]), 2),
                                "amplitude": float(a[k]), "unit": CHANNEL_UNITS[ch]})
     out["orders"] = orders

@@ -11,8 +11,10 @@
 3. Trial-refit the :data:`TOP_K` best, keep the one that lowers the cost
    most, and add it if the relative improvement is at least
    :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
-   percentage points). Repeat until no candidate passes; then say that
-   nothing (more) is missing rather than invent an effect.
+   percentage points), and, when a validation record is given, if it also
+   lowers the validation NMSE by :data:`VALIDATION_GAIN`. Repeat until no
+   candidate passes; then say that nothing (more) is missing rather than
+   invent an effect.
 
 NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
@@ -27,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from hdgym.params import JointParams
 from hdgym.record import Record, read_record
@@ -42,7 +45,13 @@ MIN_GAIN = 0.005
 """Least drop of the mean NMSE, percentage points, for an effect to be added."""
 MIN_SCORE = 0.03
 """Least share of the residual a linearized refit must explain for a trial refit."""
+VALIDATION_GAIN = 0.1
+"""With a validation record, an effect must also cut its NMSE by this share (10 %)."""
 TOP_K = 3
+NESTED = {"stribeck_friction": "stiction"}
+"""Effect -> simpler effect that is its limit case (preferred when it does nearly as well)."""
+PARSIMONY = 0.75
+"""The simpler effect is preferred if it achieves this share of the winner's improvement."""
 MAX_STEPS = 4
 
 
@@ -129,16 +138,19 @@ def _set(p: JointParams, path: str, value: float) -> JointParams:
     return set_values(p, {path: value})
 
 
-def rank_candidates(problem: Problem, current: JointParams) -> list[dict]:
+def rank_candidates(problem: Problem, current: JointParams,
+                    anchor: JointParams | None = None) -> list[dict]:
     """Every effect that is off, testable and whose requirements are on, scored two ways.
 
     ``signature_explained``: fraction of the residual energy the effect's
     signature regressors explain (linear regression per channel).
-    ``sensitivity_explained``: fraction a linearized refit explains, i.e. a
-    Gauss-Newton step over the base parameters plus the candidate switched
-    on at the registry's data-based guess and its own parameters; the base
-    columns alone explain next to nothing at the base optimum, so the
-    difference is what the candidate adds. Candidates are ranked by the
+    ``sensitivity_explained``: the larger of the share of the residual
+    energy removed by switching the candidate on at its best coarse-grid
+    start (:func:`_start`) and the share a linearized refit explains (a
+    Gauss-Newton step over the base parameters plus the candidate's own
+    parameters at that start; the base columns alone explain next to
+    nothing at the base optimum, so the difference is what the candidate
+    adds). Candidates are ranked by the
     sensitivity score (the signature score breaks ties and is reported as
     evidence).
     """
@@ -146,7 +158,7 @@ def rank_candidates(problem: Problem, current: JointParams) -> list[dict]:
     r0 = _stack(problem, res)
     _, w = _weighted(problem, res)
     ctx = problem.masked_context()
-    base_cols = _columns(problem, current, model_params(current, problem.scales), r0)
+    base_cols = _columns(problem, current, model_params(current, problem.scales, anchor), r0)
     base_frac = R._lstsq_explained(-r0, np.column_stack(base_cols))[0] if base_cols else 0.0
     out = []
     for name, eff in REGISTRY.items():
@@ -157,11 +169,13 @@ def rank_candidates(problem: Problem, current: JointParams) -> list[dict]:
         sig = R.signature(eff.signature, res, w, ctx)
         sens = 0.0
         try:
-            q = eff.switch_on(current, problem.scales)
+            q = _start(problem, current, name)
             on = _stack(problem, problem.residuals(q))
+            start_gain = 1.0 - float(on @ on) / max(float(r0 @ r0), 1e-300)
             cols = base_cols + [on - r0] + _columns(problem, q, eff.fit_params(q, problem.scales),
                                                     on)
-            sens = max(R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac, 0.0)
+            lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
+            sens = max(lin, start_gain, 0.0)
         except (SimulationError, ValueError):
             pass
         out.append({"name": name, "signature": eff.signature,
@@ -173,24 +187,89 @@ def rank_candidates(problem: Problem, current: JointParams) -> list[dict]:
 
 
 def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
-    """Switch ``name`` on and scale its own parameters (x 0.1 .. 10) to the cheapest start."""
+    """Switch ``name`` on and pick the cheapest start on a coarse grid of its size.
+
+    Friction with stick-slip makes the cost narrow-valleyed in the static
+    friction level, so a gradient method started far away stalls: every
+    size-like parameter (lower bound 0) is set to the same fraction of its
+    range on a geometric grid (shape parameters such as Maxwell-slip
+    stiffness or the Stribeck velocity take a few values); parameters with
+    a data-based guess (order lines, amplifier limits) are scaled around it.
+    """
     from .registry import set_values
 
     eff = REGISTRY[name]
     q = eff.switch_on(p, problem.scales)
     fps = eff.fit_params(q, problem.scales)
-    best, best_cost = q, problem.nmse(q)["mean"]
-    for f in (0.1, 0.3, 3.0, 10.0):
-        vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in fps
-                if not fp.path.endswith("stribeck_velocity")}
+    shape = [fp for fp in fps if fp.path.endswith(("element_stiffness]", "stribeck_velocity"))
+             or "element_stiffness[" in fp.path]
+    size = [fp for fp in fps if fp not in shape and fp.lower == 0.0]
+    rest = [fp for fp in fps if fp not in shape and fp not in size]
+    trials: list[dict[str, float]] = []
+    if size:
+        shapes: list[dict[str, float]] = [{}]
+        if any(fp.path.endswith("stribeck_velocity") for fp in shape):
+            shapes = [{fp.path: fp.lower + g * (fp.upper - fp.lower) for fp in shape
+                       if fp.path.endswith("stribeck_velocity")} for g in (0.02, 0.1, 0.4)]
+        for f in np.geomspace(1e-3, 0.8, 12):
+            for sh in shapes:
+                trials.append({**{fp.path: f * fp.upper for fp in size}, **sh})
+    for f in (0.3, 3.0):
+        vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in rest}
+        if vals:
+            trials.append(vals)
+    def cost(vals: dict[str, float]) -> float:
         try:
-            qq = set_values(q, vals)
+            return problem.nmse(set_values(q, vals))["mean"]
         except ValueError:
-            continue
-        c = problem.nmse(qq)["mean"]
+            return math.inf
+
+    best_vals: dict[str, float] = {}
+    best_cost = problem.nmse(q)["mean"]
+    for vals in trials:
+        c = cost(vals)
         if c < best_cost:
-            best, best_cost = qq, c
-    return best
+            best_vals, best_cost = vals, c
+    if size and best_vals:
+        # the valley of a static friction level is narrow: refine the common fraction
+        f0 = best_vals[size[0].path] / size[0].upper
+        sh = {k: v for k, v in best_vals.items() if k not in {fp.path for fp in size}}
+
+        def along(logf: float) -> float:
+            return cost({**{fp.path: math.exp(logf) * fp.upper for fp in size}, **sh})
+
+        step = math.log(0.8 / 1e-3) / 11
+        opt = minimize_scalar(along, bounds=(math.log(f0) - step, math.log(f0) + step),
+                              method="bounded", options={"maxiter": 12, "xatol": 0.01})
+        if opt.fun < best_cost:
+            best_vals = {**{fp.path: math.exp(opt.x) * fp.upper for fp in size}, **sh}
+    return set_values(q, best_vals) if best_vals else q
+
+
+def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths: list[str],
+           cand: dict, nfev: int) -> tuple[float, dict, FitResult]:
+    """Trial refit with candidate ``cand`` added; records its improvement in ``cand``."""
+    # two starts: the current fit, and the given values of the base parameters (a base
+    # fit may have wandered off to mimic the missing effect); keep the cheaper
+    q = _start(problem, current.params, cand["name"])
+    q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
+    if problem.nmse(q2)["mean"] < problem.nmse(q)["mean"]:
+        q = q2
+    res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
+    rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
+    cand["trial_nmse"] = res.nmse["mean"]
+    cand["relative_improvement"] = rel
+    return res.cost, cand, res
+
+
+def _reset(p: JointParams, given: JointParams, paths: list[str]) -> JointParams:
+    """``p`` with the parameters at ``paths`` back at their values in ``given``."""
+    from .registry import set_values
+
+    try:
+        return set_values(p, {path: get_value(given, path) for path in paths})
+    except ValueError:
+        return p
 
 
 def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
@@ -199,7 +278,8 @@ def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | Non
 
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
              mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
-             quick: bool = False, cutoff: float | None = None) -> Diagnosis:
+             quick: bool = False, cutoff: float | None = None,
+             segment: float | None = 0.5) -> Diagnosis:
     """Compare ``params`` with ``record``, find, name and add the missing effects.
 
     Args:
@@ -211,16 +291,20 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         max_steps: most effects added.
         quick: fewer least-squares iterations.
         cutoff: filter cutoff, Hz (default a twentieth of the sample rate).
+        segment: multiple-shooting segment length, s (see :class:`.fitting.Problem`).
     """
     t0 = _time.perf_counter()
-    problem = Problem(record, params, mode=mode, cutoff=cutoff)
-    vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names)
+    problem = Problem(record, params, mode=mode, cutoff=cutoff, segment=segment)
+    vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names,
+                     segment=segment)
              if validate is not None else None)
     nfev_base, nfev_trial, nfev_polish = (20, 10, 20) if quick else (40, 15, 30)
     untestable = [n for n, e in REGISTRY.items() if not e.testable(problem.scales)]
 
     given = problem.nmse(params)
-    before = fit(problem, params, model_params(params, problem.scales), max_nfev=nfev_base)
+    base_paths = [fp.path for fp in model_params(params, problem.scales, params)]
+    before = fit(problem, params, model_params(params, problem.scales, params),
+                 max_nfev=nfev_base)
     current = before
     steps: list[Step] = []
     conclusion = ""
@@ -228,14 +312,14 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     for _ in range(max_steps):
         # control refit: the same iteration budget without a new effect, so a candidate is
         # credited only with what the effect adds, not with a longer optimization
-        control = fit(problem, current.params, model_params(current.params, problem.scales),
-                      max_nfev=nfev_trial)
+        control = fit(problem, current.params,
+                      model_params(current.params, problem.scales, params), max_nfev=nfev_trial)
         if control.cost < current.cost:
             current = FitResult(control.params, {**current.values, **control.values},
                                 control.nmse, control.nfev, control.cost)
             if not steps:
                 before = current
-        candidates = rank_candidates(problem, current.params)
+        candidates = rank_candidates(problem, current.params, params)
         if not candidates:
             conclusion = "every testable effect is already in the model"
             break
@@ -247,14 +331,20 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                           f"{candidates[0]['name']}, {100 * top:.1f} %)")
             break
         for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
-            q = _start(problem, current.params, cand["name"])
-            res = fit(problem, q, model_params(q, problem.scales), max_nfev=nfev_trial)
-            rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
-            cand["trial_nmse"] = res.nmse["mean"]
-            cand["relative_improvement"] = rel
-            trials.append((res.cost, cand, res))
+            trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
         trials.sort(key=lambda t: t[0])
         cost, best, res = trials[0]
+        # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
+        # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
+        simpler = NESTED.get(best["name"])
+        by_name = {c["name"]: c for c in candidates}
+        if simpler in by_name:
+            if "relative_improvement" not in by_name[simpler]:
+                trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
+                                     nfev_trial))
+            alt = next(t for t in trials if t[1]["name"] == simpler)
+            if alt[1]["relative_improvement"] >= PARSIMONY * best["relative_improvement"]:
+                cost, best, res = alt
         rel = best["relative_improvement"]
         gain = current.nmse["mean"] - res.nmse["mean"]
         if rel < threshold or gain < MIN_GAIN:
@@ -263,10 +353,21 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                           f"{100 * threshold:.0f} %) and the mean NMSE by {gain:.3g} points "
                           f"(threshold {MIN_GAIN:g})")
             break
-        polished = fit(problem, res.params, model_params(res.params, problem.scales),
+        polished = fit(problem, res.params, model_params(res.params, problem.scales, params),
                        max_nfev=nfev_polish)
         if polished.cost > res.cost:
             polished = res
+        if vprob is not None:
+            # hold-out check: an effect that fits the training record better but does not
+            # carry over to the validation record is fitting the noise or the fit's slack
+            v_now = vprob.nmse(current.params)["mean"]
+            v_new = vprob.nmse(polished.params)["mean"]
+            if not v_new <= (1.0 - VALIDATION_GAIN) * v_now:
+                conclusion = (f"nothing (more) worth adding: the best candidate, {best['name']}, "
+                              f"cuts the training cost by {100 * rel:.1f} % but the validation "
+                              f"NMSE only from {v_now:.3g} % to {v_new:.3g} % (needs "
+                              f"{100 * VALIDATION_GAIN:.0f} % less)")
+                break
         eff = REGISTRY[best["name"]]
         values = {fp.path: get_value(polished.params, fp.path)
                   for fp in eff.fit_params(polished.params, problem.scales)}
