@@ -206,14 +206,15 @@ def label(name: str) -> str:
     return name
 
 
-def markdown_table(stats: list[EpisodeStats]) -> str:
+def markdown_table(stats: list[EpisodeStats], policy_label: str | None = None) -> str:
     rows = ["| controller | episodes | reached target | trapped < 9,000 deg/s | mean time to "
             "target (s) | peak flexspline torque, mean / max (N m) | highest speed, mean "
             "(deg/s) | safety stops |",
             "|---|---|---|---|---|---|---|---|"]
     for s in stats:
         tt = "-" if math.isnan(s.time_to_target_s) else f"{s.time_to_target_s:.2f}"
-        rows.append(f"| {label(s.controller)} | {s.episodes} | {100 * s.reached:.0f} % | "
+        name = policy_label if s.controller == "policy" and policy_label else label(s.controller)
+        rows.append(f"| {name} | {s.episodes} | {100 * s.reached:.0f} % | "
                     f"{100 * s.trapped:.0f} % | {tt} | {s.peak_torque_mean:.0f} / "
                     f"{s.peak_torque_max:.0f} | {s.max_speed_deg_s:,.0f} | "
                     f"{100 * s.terminated:.0f} % |")
@@ -248,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"agents.evaluate: {exc}", file=sys.stderr)
         return 2
-    table = markdown_table(stats)
+    table = markdown_table(stats, None if model is None else f"{type(model).__name__} policy")
     print(table)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
