@@ -143,8 +143,9 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
     rows = bench_physics(p, quick)
     for r in rows:
         r["note"] = None
-    rows[-1]["note"] = (f"substeps/s at 1,024 envs: {rows[-1]['substeps_per_s']:,.0f} "
-                        f"({p.integration.n_substeps} substeps per 1 ms step)")
+    rows[-1]["note"] = ("substeps/s, stepped from Python: " + ", ".join(
+        f"{r['name'].split(',')[1].strip()} {r['substeps_per_s']:,.0f}" for r in rows)
+        + f" ({p.integration.n_substeps} substeps per 1 ms control period)")
     sections["Physics step (tuttle-joint1, every effect on)"] = rows
     try:
         from hdgym.envs.bench import bench_envs
