@@ -178,7 +178,7 @@ def findings(stats: dict[str, Any], params: Any, steps: list[Any]) -> str:
     if sure:
         low = sure[0]
         lines.insert(1, f"- Of the constant-current steps below, the lowest that reaches the "
-                     f"target as often ({label(low.controller)}: "
+                     f"target at least as often ({label(low.controller)}: "
                      f"{100 * low.reached:.0f} %) peaks at {low.peak_torque_mean:.0f} N m "
                      f"(max {low.peak_torque_max:.0f}).")
     return "\n".join(lines) + "\n"
@@ -261,6 +261,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--out", type=Path, default=Path("results/rl"))
+    ap.add_argument("--check-seed", type=int, default=0,
+                    help="first seed of a second, larger set of episodes for the policy only")
+    ap.add_argument("--check-episodes", type=int, default=200)
     args = ap.parse_args(argv)
     if not args.policy.is_file():
         print(f"agents.report: no such policy {str(args.policy)!r}", file=sys.stderr)
@@ -276,10 +279,16 @@ def main(argv: list[str] | None = None) -> int:
         other = load_policy(run / "final.zip")
         seed_stats, _ = evaluate(cfg, ["policy"], args.episodes, args.seed, other)
         tj = run / "train.json"
-        tag = f"training seed {json.loads(tj.read_text())['seed']}" if tj.exists() else run.name
+        tag = run.name
+        if tj.exists():
+            t = json.loads(tj.read_text())
+            tag = f"{Path(t['config']).stem}, training seed {t['seed']}"
         seed_stats[0].controller = f"policy-{tag}"
         stats.append(seed_stats[0])
     step_stats, _ = evaluate(cfg, STEPS + ["full"], args.episodes, args.seed)
+    check = None
+    if args.check_episodes > 0:
+        check = evaluate(cfg, ["policy"], args.check_episodes, args.check_seed, model)[0][0]
     table = markdown_table(stats)
     steps_table = markdown_table(step_stats)
     print(table)
@@ -303,6 +312,15 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         policy = args.policy.as_posix()
     found = findings({s.controller: s for s in stats}, u.params, step_stats)
+    if check is not None:
+        found += (f"- On {check.episodes} other episodes (seeds {args.check_seed}-"
+                  f"{args.check_seed + check.episodes - 1}) the committed policy reaches the "
+                  f"target in {100 * check.reached:.0f} % (trapped {100 * check.trapped:.0f} %), "
+                  f"peak torque {check.peak_torque_mean:.0f} / {check.peak_torque_max:.0f} N m, "
+                  f"time to target {check.time_to_target_s:.2f} s."
+                  + (" The episodes it misses are still in the trap when the episode ends."
+                     if check.reached < 1 and math.isclose(1 - check.reached, check.trapped)
+                     else "") + "\n")
     write_markdown(args.out, table, steps_table, cfg, pi_text, info, args.episodes, args.seed,
                    policy, found)
     probe.close()
