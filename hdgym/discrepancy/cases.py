@@ -14,7 +14,6 @@ Regenerate the table with::
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from dataclasses import dataclass
@@ -43,7 +42,7 @@ from hdgym.sim import Simulator
 
 from .experiments import PROTOCOLS, command
 from .registry import REGISTRY, Scales, core_params, get_value, set_values
-from .workflow import Diagnosis, diagnose
+from .workflow import MIN_GAIN, THRESHOLD, VALIDATION_GAIN, Diagnosis, diagnose
 
 BASE_EFFECTS = ("coulomb_friction", "viscous_friction")
 """Effects every case joint has (the ones a base model assumes)."""
@@ -236,12 +235,39 @@ def main(argv: list[str] | None = None) -> int:
         "when the hidden effects are named first and the validation NMSE falls by at least "
         "80 %, or, with nothing hidden, when nothing is named.",
         "",
-        f"Adding threshold: relative cost reduction >= {int(100 * 0.25)} % and mean NMSE drop "
-        ">= 0.02 points (`hdgym.discrepancy.workflow.THRESHOLD`, `MIN_GAIN`).",
+        f"Adding rule: relative cost reduction >= {100 * THRESHOLD:.0f} %, mean NMSE drop >= "
+        f"{MIN_GAIN:g} points and validation NMSE down by >= {100 * VALIDATION_GAIN:.0f} % "
+        "(`hdgym.discrepancy.workflow.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
+        "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
+        "preferred to Stribeck friction when it achieves >= 75 % of its improvement "
+        "(`PARSIMONY`).",
         "",
         table(results),
         "",
         f"{npass} of {len(results)} cases pass.",
+        "",
+    ])
+    text += "\n".join([
+        "",
+        "## How to read it",
+        "",
+        "- *found* lists every effect the workflow added, in order; effects after the hidden "
+        "one are extra (a base fit that has not fully converged leaves slack an extra effect "
+        "can take up; the hold-out check removes most, not all of them).",
+        "- Protocols come from `hdgym.discrepancy.experiments` and are designed from the truth "
+        "joint's parameters; records are short (3 s at 1 kHz) to keep the sweep cheap.",
+        "- The per-effect tests in `tests/test_discrepancy.py` run the same cases on 2 s "
+        "records.",
+        "",
+        "## Known limits",
+        "",
+        "- Stiction and Stribeck friction are nested (stiction is Stribeck friction with a "
+        "vanishing Stribeck velocity) and both act through stick-slip, where the "
+        "least-squares cost is rough: the workflow separates them only by a parsimony rule, "
+        "and the validation gap on the breakaway-ramp records closes by well under 80 %.",
+        "- NMSE is normalized by each channel's variance; a nearly constant channel (the "
+        "torque at constant speed) gives very large NMSE values for small offsets, as in the "
+        "position-dependent-friction row.",
         "",
     ])
     failed = [r for r in results if not r.passed]
@@ -256,4 +282,3 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
-    math  # noqa: B018

@@ -395,12 +395,17 @@ class FitResult:
     cost: float
 
 
+DIFF_STEP = 1e-3
+"""Finite-difference step, as a share of each parameter's range (stick-slip makes the cost
+rough on a finer scale)."""
+
+
 def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 40,
-        decimate: int | None = None) -> FitResult:
+        decimate: int | None = None, diff_step: float | None = None) -> FitResult:
     """Bounded least squares of ``fps`` (starting at their guesses or current values).
 
     Variables are scaled to their bounds (``z = 1 + (x - lo)/(hi - lo)``) so
-    a relative finite-difference step of 1e-3 is a thousandth of each range.
+    a relative finite-difference step (:data:`DIFF_STEP`) is that share of each range.
     """
     from .registry import get_value
 
@@ -430,7 +435,8 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
 
     z0 = 1.0 + (x0 - lo) / span
     sol = least_squares(fun, z0, bounds=(np.ones_like(z0), 2 * np.ones_like(z0)), method="trf",
-                        diff_step=1e-3, max_nfev=max_nfev, ftol=1e-6, xtol=1e-6, gtol=1e-8)
+                        diff_step=diff_step or DIFF_STEP, max_nfev=max_nfev, ftol=1e-6,
+                        xtol=1e-6, gtol=1e-8)
     best = build(sol.x)
     values = {fp.path: float(get_value(best, fp.path)) for fp in fps}
     nm = problem.nmse(best)

@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     # the two sweep cycles: fit on the first, validate on the second
     tm = float(rec.time[len(rec) // 2])
     train, val = rec.slice(None, tm), rec.slice(tm, None)
-    diag = diagnose(train, params, val, mode="inverse")
+    diag = diagnose(train, params, val, mode="inverse", fit_window=None)
     notes = _notes(diag, data, kt_out)
     notes.append("Base model: zxf17-50.toml in this folder (written by the same command); the "
                  "data are read from /work/shared/real-data/harivin-zxf17 at run time (MIT "

@@ -69,6 +69,9 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
         "nmse_after_training": _nm(diag.after.nmse),
         "nmse_before_validation": _nm(diag.nmse_before_validation),
         "nmse_after_validation": _nm(diag.nmse_after_validation),
+        "fit_window_s": diag.fit_window,
+        "nmse_record_before": _nm(diag.nmse_record_before),
+        "nmse_record_after": _nm(diag.nmse_record_after),
         "base_fit": {k: _r(v, 6) for k, v in diag.before.values.items()},
         "final_fit": {k: _r(v, 6) for k, v in diag.after.values.items()},
         "steps": steps,
@@ -233,6 +236,10 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
         f"model fitted -> {js['nmse_after']} % after. {js['conclusion']}.",
         "",
     ]
+    if js.get("fit_window_s"):
+        rb, ra = js["nmse_record_before"], js["nmse_record_after"]
+        lines += [f"Fitted on the first {js['fit_window_s']:g} s of the record; on the whole "
+                  f"record the NMSE goes from {rb['mean']} % to {ra['mean']} %.", ""]
     if js["steps"]:
         lines += ["## Steps", "", "| step | effect | evidence | NMSE after % | fitted parameters |",
                   "|---|---|---|---|---|"]

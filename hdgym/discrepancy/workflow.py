@@ -39,8 +39,8 @@ from . import residuals as R
 from .fitting import FitResult, Problem, fit
 from .registry import REGISTRY, get_value, model_params
 
-THRESHOLD = 0.25
-"""Least relative cost reduction (25 %) for an effect to be added."""
+THRESHOLD = 0.4
+"""Least relative cost reduction (40 %) for an effect to be added."""
 MIN_GAIN = 0.005
 """Least drop of the mean NMSE, percentage points, for an effect to be added."""
 MIN_SCORE = 0.03
@@ -53,6 +53,8 @@ NESTED = {"stribeck_friction": "stiction"}
 PARSIMONY = 0.75
 """The simpler effect is preferred if it achieves this share of the winner's improvement."""
 MAX_STEPS = 4
+FIT_WINDOW = 5.0
+"""Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
 
 
 @dataclass
@@ -93,6 +95,9 @@ class Diagnosis:
     seconds: float = 0.0
     problem: Problem | None = field(default=None, repr=False)
     validation: Problem | None = field(default=None, repr=False)
+    fit_window: float | None = None
+    nmse_record_before: dict[str, float] | None = None
+    nmse_record_after: dict[str, float] | None = None
 
     @property
     def missing_effects(self) -> list[str]:
@@ -279,7 +284,7 @@ def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | Non
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
              mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
              quick: bool = False, cutoff: float | None = None,
-             segment: float | None = 0.5) -> Diagnosis:
+             segment: float | None = 0.5, fit_window: float | None = FIT_WINDOW) -> Diagnosis:
     """Compare ``params`` with ``record``, find, name and add the missing effects.
 
     Args:
@@ -292,8 +297,15 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         quick: fewer least-squares iterations.
         cutoff: filter cutoff, Hz (default a twentieth of the sample rate).
         segment: multiple-shooting segment length, s (see :class:`.fitting.Problem`).
+        fit_window: fit and rank on the first this many seconds of a longer record
+            (time is what a diagnosis costs); NMSE is then also reported on the whole
+            record (``nmse_record_before`` / ``_after``). None: use it all.
     """
     t0 = _time.perf_counter()
+    full = None
+    if fit_window and record.duration > fit_window * 1.001:
+        full = record
+        record = record.slice(None, float(record.time[0]) + fit_window)
     problem = Problem(record, params, mode=mode, cutoff=cutoff, segment=segment)
     vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names,
                      segment=segment)
@@ -395,7 +407,18 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, seconds=_time.perf_counter() - t0, problem=problem,
-        validation=vprob)
+        validation=vprob, fit_window=None if full is None else fit_window,
+        nmse_record_before=None if full is None else _full_nmse(full, params, problem,
+                                                                 before.params),
+        nmse_record_after=None if full is None else _full_nmse(full, params, problem,
+                                                               current.params))
+
+
+def _full_nmse(record: Record, params: JointParams, problem: Problem,
+               p: JointParams) -> dict[str, float]:
+    full = Problem(record, params, mode=problem.mode, cutoff=problem.cutoff,
+                   channels=problem.names, segment=problem.segment)
+    return full.nmse(p)
 
 
 def _where(problem: Problem, p: JointParams) -> dict:
