@@ -15,12 +15,20 @@ Errors are computed on the *true* output angle (re-simulated from the
 recorded current; see :mod:`controllers.scenarios`); the controllers only
 ever see the sensors. The PID is designed with python-control
 (:func:`controllers.scenarios.motor_pid`), the same for every row.
+
+:data:`SCENARIOS` runs the same scenarios one controller config at a time
+for ``hdgym sweep`` (``controllers:tracking``, ``controllers:load_step``,
+``controllers:point_to_point``; spec ``hdgym/sweep/specs/controllers.toml``):
+designed on the nominal drive, run on a randomized one.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +37,7 @@ import numpy as np
 from controllers import scenarios as S
 from controllers import tuning
 from controllers.dob import DisturbanceObserver
-from controllers.ke_feedforward import KEFeedforward, identify_ke
+from controllers.ke_feedforward import KEFeedforward, KEModel, identify_ke
 from controllers.repetitive import RepetitiveController
 from hdgym.params import JointParams, preset
 
@@ -82,14 +90,28 @@ def chatter(run: S.Run) -> float:
     return float(np.sqrt(np.mean(np.diff(run.record.columns["current_command"]) ** 2)))
 
 
-def tracking(p: JointParams, cfg: dict[str, float], wg_rev_s: float,
-             sweep_too: bool = True) -> dict[str, Any]:
-    """Slow constant-speed tracking: PID, PID + KE feedforward, PID + repetitive.
+@dataclass
+class TrackingDesign:
+    """What the slow-tracking controllers are built from, designed on one drive."""
+
+    wg_rev_s: float
+    output_speed: float
+    reference: Callable[[float], float]
+    pid: Any
+    design: Any
+    model: KEModel
+    #: orders the KE model is fitted at / the repetitive controller learns at
+    fit_orders: tuple[float, ...]
+    orders: tuple[float, ...]
+
+
+def tracking_design(p: JointParams, cfg: dict[str, float], wg_rev_s: float) -> TrackingDesign:
+    """PID design and KE identification for constant-speed tracking at ``wg_rev_s``.
 
     The KE model is fitted at the WG orders 1, 2, 4 and the split lines of
-    the non-grounded spline (:func:`controllers.scenarios.ke_orders`); the
-    repetitive controller learns at the orders whose identified amplitude is
-    at least 10 % of the largest.
+    the non-grounded spline (:func:`controllers.scenarios.ke_orders`) from a
+    separate (longer) PID record; the repetitive controller learns at the
+    orders whose identified amplitude is at least 10 % of the largest.
     """
     w_out = wg_rev_s * 2 * math.pi / p.ratio
     ref = S.ramp(w_out, ramp_time=cfg["ramp_time"])
@@ -101,22 +123,66 @@ def tracking(p: JointParams, cfg: dict[str, float], wg_rev_s: float,
     model = identify_ke(ident.record, fit_orders, settle=cfg["ramp_time"] + 2.0)
     amps = model.amplitudes()
     orders = tuple(o for o, a in amps.items() if a >= 0.1 * max(amps.values()))
+    return TrackingDesign(wg_rev_s, w_out, ref, pid, design, model, fit_orders, orders)
+
+
+def controller_for(kind: str, p: JointParams, pid: Any, cfg: dict[str, float], *,
+                   tracking: TrackingDesign | None = None,
+                   dob_bandwidth_hz: float | None = None, rc_gain: float | None = None) -> Any:
+    """A fresh controller of ``kind`` (see :data:`KINDS`) around ``pid``, designed on ``p``.
+
+    ``pid+ke-shift``, ``pid+ke`` and ``pid+repetitive`` need the KE model and
+    orders of a :class:`TrackingDesign`.
+    """
+    if kind == "pid":
+        return pid
+    if kind == "pid+dob":
+        return dob_for(p, pid, dob_bandwidth_hz)
+    if kind not in KINDS:
+        raise ValueError(f"unknown controller kind {kind!r}; known: {', '.join(KINDS)}")
+    if tracking is None:
+        raise ValueError(f"controller kind {kind!r} needs a tracking design (KE model)")
+    if kind == "pid+ke-shift":
+        return KEFeedforward(pid, tracking.model, p.ratio)
+    if kind == "pid+ke":
+        return KEFeedforward(pid, tracking.model, p.ratio, offset=True,
+                             torque_constant=p.motor.torque_constant,
+                             load_inertia=p.load.inertia / p.ratio ** 2,
+                             dt=p.integration.ctrl_dt)
+    return RepetitiveController(pid, p.ratio, tracking.orders,
+                                cfg["rc_gain"] if rc_gain is None else rc_gain,
+                                start=cfg["rc_start"],
+                                output_offset=S.half_count(p.sensors.output_counts))
+
+
+def tracking_window(run: S.Run, cfg: dict[str, float]) -> np.ndarray:
+    """Samples of a tracking run that are scored (from ``eval_start`` to the end)."""
+    return run.time >= cfg["eval_start"]
+
+
+#: the tracking benchmark's rows and the controller kind of each
+TRACKING_ROWS = {"PID": "pid", "PID + KE ref. shift only": "pid+ke-shift",
+                 "PID + KE feedforward": "pid+ke", "PID + repetitive": "pid+repetitive"}
+
+
+def tracking(p: JointParams, cfg: dict[str, float], wg_rev_s: float,
+             sweep_too: bool = True) -> dict[str, Any]:
+    """Slow constant-speed tracking: PID, PID + KE feedforward, PID + repetitive.
+
+    Designed by :func:`tracking_design` on ``p``; the controllers are
+    :func:`controller_for` of each kind in :data:`TRACKING_ROWS`.
+    """
+    d = tracking_design(p, cfg, wg_rev_s)
+    pid, design, model, orders, ref = d.pid, d.design, d.model, d.orders, d.reference
+    w_out, fit_orders = d.output_speed, d.fit_orders
 
     dur = cfg["track_duration"]
-    runs: dict[str, S.Run] = {}
-    runs["PID"] = S.closed_loop(p, pid, dur, ref)
-    runs["PID + KE ref. shift only"] = S.closed_loop(p, KEFeedforward(pid, model, p.ratio), dur,
-                                                     ref)
-    kef = KEFeedforward(pid, model, p.ratio, offset=True,
-                        torque_constant=p.motor.torque_constant,
-                        load_inertia=p.load.inertia / p.ratio ** 2, dt=p.integration.ctrl_dt)
-    runs["PID + KE feedforward"] = S.closed_loop(p, kef, dur, ref)
-    rc = RepetitiveController(pid, p.ratio, orders, cfg["rc_gain"], start=cfg["rc_start"],
-                              output_offset=S.half_count(p.sensors.output_counts))
-    runs["PID + repetitive"] = S.closed_loop(p, rc, dur, ref)
+    ctls = {k: controller_for(kind, p, pid, cfg, tracking=d) for k, kind in TRACKING_ROWS.items()}
+    rc = ctls["PID + repetitive"]
+    runs: dict[str, S.Run] = {k: S.closed_loop(p, c, dur, ref) for k, c in ctls.items()}
 
+    win = tracking_window(runs["PID"], cfg)
     t = runs["PID"].time
-    win = t >= cfg["eval_start"]
     rms = {k: S.rms(r.error[win]) for k, r in runs.items()}
     base = rms["PID"]
     reduction = {k: 100 * (1 - v / base) for k, v in rms.items()}
@@ -154,59 +220,96 @@ def tracking(p: JointParams, cfg: dict[str, float], wg_rev_s: float,
     }
 
 
-def load_step(p: JointParams, cfg: dict[str, float]) -> dict[str, Any]:
-    """Holding position while a load torque steps on: PID alone vs PID + DOB."""
+def load_profile(p: JointParams, cfg: dict[str, float]) -> tuple[np.ndarray, np.ndarray, float]:
+    """Time, output load torque (a step of 40 % of the peak motor torque x ratio) and step, N m."""
     step = 0.4 * p.motor.torque_constant * p.amplifier.current_limit * p.ratio
-    pid, _ = S.motor_pid(p)
-    dob = dob_for(p, pid)
     dt = p.integration.ctrl_dt
     t = np.arange(int(round(cfg["load_duration"] / dt))) * dt
-    load = np.where(t >= cfg["load_step_time"], step, 0.0)
-    runs = {"PID": S.closed_loop(p, pid, cfg["load_duration"], lambda _t: 0.0, load_torque=load),
-            "PID + DOB": S.closed_loop(p, dob, cfg["load_duration"], lambda _t: 0.0,
-                                       load_torque=load)}
-    dev = {k: -r.error for k, r in runs.items()}
-    peak_pid = float(np.abs(dev["PID"][t >= cfg["load_step_time"]]).max())
+    return t, np.where(t >= cfg["load_step_time"], step, 0.0), step
+
+
+def load_step_run(p: JointParams, controller: Any, cfg: dict[str, float], load: np.ndarray,
+                  seed: int = 0) -> S.Run:
+    """Hold position on ``p`` while ``load`` acts on the output."""
+    return S.closed_loop(p, controller, cfg["load_duration"], lambda _t: 0.0, load_torque=load,
+                         seed=seed)
+
+
+def load_step_peak(run: S.Run, t: np.ndarray, cfg: dict[str, float]) -> float:
+    """Peak |output deviation| after the step, output rad (``t`` of :func:`load_profile`)."""
+    return float(np.abs(run.error[t >= cfg["load_step_time"]]).max())
+
+
+def load_step_metrics(run: S.Run, t: np.ndarray, dt: float, cfg: dict[str, float],
+                      band: float) -> dict[str, float]:
+    """``peak`` |deviation|, ``recovery`` (until the deviation stays within ``band`` of its
+    final value, the mean of the last 0.2 s), ``final``, ``peak_current``, ``chatter`` of a
+    load-step run (rad, s, rad, A, A); ``t`` of :func:`load_profile`, ``dt`` the control
+    period."""
+    dev = -run.error
+    final = float(dev[-int(0.2 / dt):].mean())
+    m = S.deviation_metrics(t, dev - final, cfg["load_step_time"], band)
+    m["peak"] = float(np.abs(dev[t >= cfg["load_step_time"]]).max())
+    m["final"] = final
+    m["peak_current"] = float(np.abs(run.record.columns["current_command"]).max())
+    m["chatter"] = chatter(run)
+    return m
+
+
+def load_step(p: JointParams, cfg: dict[str, float]) -> dict[str, Any]:
+    """Holding position while a load torque steps on: PID alone vs PID + DOB."""
+    t, load, step = load_profile(p, cfg)
+    pid, _ = S.motor_pid(p)
+    dob = controller_for("pid+dob", p, pid, cfg)
+    runs = {"PID": load_step_run(p, pid, cfg, load),
+            "PID + DOB": load_step_run(p, dob, cfg, load)}
+    peak_pid = load_step_peak(runs["PID"], t, cfg)
     band = 0.1 * peak_pid
-    metrics = {}
-    for k, r in runs.items():
-        final = float(dev[k][-int(0.2 / dt):].mean())
-        m = S.deviation_metrics(t, dev[k] - final, cfg["load_step_time"], band)
-        m["peak"] = float(np.abs(dev[k][t >= cfg["load_step_time"]]).max())
-        m["final"] = final
-        m["peak_current"] = float(np.abs(r.record.columns["current_command"]).max())
-        m["chatter"] = chatter(r)
-        metrics[k] = m
+    metrics = {k: load_step_metrics(r, t, p.integration.ctrl_dt, cfg, band)
+               for k, r in runs.items()}
     # Q-filter bandwidth trade-off: rejection against current chatter
     fres = tuning.resonance_hz(p)
     q_sweep = []
     for frac in (0.3, 0.45, 0.6):
-        r = S.closed_loop(p, dob_for(p, pid, frac * fres), cfg["load_duration"],
-                          lambda _t: 0.0, load_torque=load)
-        peak = float(np.abs(r.error[t >= cfg["load_step_time"]]).max())
+        r = load_step_run(p, dob_for(p, pid, frac * fres), cfg, load)
+        peak = load_step_peak(r, t, cfg)
         q_sweep.append((frac * fres, 100 * (1 - peak / peak_pid), chatter(r)))
     return {"step": step, "band": band, "metrics": metrics, "runs": runs,
             "dob_bandwidth": dob.bandwidth_hz, "q_sweep": q_sweep,
             "reduction": 100 * (1 - metrics["PID + DOB"]["peak"] / metrics["PID"]["peak"])}
 
 
+#: point-to-point move: distance (output rad), start (s), move time (s), settling band (rad)
+P2P_MOVE = {"distance": 0.5, "start": 0.2, "move_time": 1.0, "band": 1e-3}
+
+
+def point_to_point_run(p: JointParams, controller: Any, cfg: dict[str, float],
+                       seed: int = 0) -> S.Run:
+    """The minimum-jerk move of :data:`P2P_MOVE` on ``p``."""
+    ref = S.min_jerk(P2P_MOVE["distance"], P2P_MOVE["start"], P2P_MOVE["move_time"])
+    return S.closed_loop(p, controller, cfg["p2p_duration"], ref, seed=seed)
+
+
+def point_to_point_metrics(run: S.Run) -> dict[str, float]:
+    """``overshoot_pct``, ``settling_time`` (s after the reference move ends; inf: never
+    settles in the run), ``peak_current`` (A), ``final_error`` (rad), ``chatter`` (A)."""
+    dist, start, move = P2P_MOVE["distance"], P2P_MOVE["start"], P2P_MOVE["move_time"]
+    m = S.step_metrics(run.time, run.output_angle, dist, start, P2P_MOVE["band"])
+    m["settling_time"] -= move if math.isfinite(m["settling_time"]) else 0.0
+    m["peak_current"] = float(np.abs(run.record.columns["current_command"]).max())
+    m["final_error"] = float(run.error[-1])
+    m["chatter"] = chatter(run)
+    return m
+
+
 def point_to_point(p: JointParams, cfg: dict[str, float]) -> dict[str, Any]:
     """Minimum-jerk move of 0.5 output rad in 1 s from rest."""
-    dist, start, move = 0.5, 0.2, 1.0
-    ref = S.min_jerk(dist, start, move)
     pid, _ = S.motor_pid(p)
-    runs = {"PID": S.closed_loop(p, pid, cfg["p2p_duration"], ref),
-            "PID + DOB": S.closed_loop(p, dob_for(p, pid), cfg["p2p_duration"], ref)}
-    band = 1e-3  # output rad (0.057 deg)
-    metrics = {}
-    for k, r in runs.items():
-        m = S.step_metrics(r.time, r.output_angle, dist, start, band)
-        m["settling_time"] -= move if math.isfinite(m["settling_time"]) else 0.0
-        m["peak_current"] = float(np.abs(r.record.columns["current_command"]).max())
-        m["final_error"] = float(r.error[-1])
-        m["chatter"] = chatter(r)
-        metrics[k] = m
-    return {"distance": dist, "move_time": move, "start": start, "band": band,
+    runs = {"PID": point_to_point_run(p, pid, cfg),
+            "PID + DOB": point_to_point_run(p, controller_for("pid+dob", p, pid, cfg), cfg)}
+    metrics = {k: point_to_point_metrics(r) for k, r in runs.items()}
+    return {"distance": P2P_MOVE["distance"], "move_time": P2P_MOVE["move_time"],
+            "start": P2P_MOVE["start"], "band": P2P_MOVE["band"],
             "metrics": metrics, "runs": runs}
 
 
@@ -227,6 +330,185 @@ def bode(p: JointParams, cfg: dict[str, float]) -> dict[str, Any]:
         out[ch] = {"f": f, "h": h, "model": m, "coherence": coh,
                    "max_db": float(np.abs(db).max()), "max_deg": float(np.abs(deg).max())}
     return {"channels": out, "fmax": fmax, "resonance_hz": fr, "antiresonance_hz": fa}
+
+
+# ------------------------------------------------- one controller per run (sweeps)
+#
+# ``SCENARIOS`` is what ``hdgym sweep`` runs for ``controllers:NAME``
+# (hdgym.sweep.scenarios): each function runs ONE controller config on the
+# given, possibly randomized, drive. The controller is designed on the
+# *nominal* drive (the preset as the datasheet gives it, passed as
+# ``nominal``): PID, KE model, DOB model; the randomized drive only runs it.
+# The settings, runs and metrics are the benchmark's above.
+
+#: controller kinds and the benchmark scenarios each takes part in
+KINDS: dict[str, tuple[str, ...]] = {
+    "pid": ("tracking", "load_step", "point_to_point"),
+    "pid+ke": ("tracking",),
+    "pid+ke-shift": ("tracking",),
+    "pid+repetitive": ("tracking",),
+    "pid+dob": ("tracking", "load_step", "point_to_point"),
+}
+#: keys of a controller config; numbers must be > 0
+CONTROLLER_KEYS = {"name": str, "kind": str, "dob_bandwidth_hz": float, "rc_gain": float}
+_ARCSEC = 180 / math.pi * 3600
+
+
+class ControllerConfigError(ValueError):
+    """A bad controller config; ``key`` names the offending key."""
+
+    def __init__(self, msg: str, key: str | None = None):
+        super().__init__(msg)
+        self.key = key
+
+
+def check_controller(config: Mapping[str, Any]) -> None:
+    """Raise ValueError (:class:`ControllerConfigError`) for a bad controller config.
+
+    Keys: ``name``, ``kind`` (one of :data:`KINDS`, default ``"pid"``),
+    ``dob_bandwidth_hz`` (Q-filter bandwidth of ``pid+dob``; default 0.6 x
+    the nominal resonance), ``rc_gain`` (learning gain of ``pid+repetitive``;
+    default the benchmark's).
+    """
+    for key, value in config.items():
+        if key not in CONTROLLER_KEYS:
+            raise ControllerConfigError(
+                f"unknown key {key!r}; known: {', '.join(sorted(CONTROLLER_KEYS))}", key)
+        if CONTROLLER_KEYS[key] is float and not (
+                isinstance(value, (int, float)) and not isinstance(value, bool)
+                and math.isfinite(value) and value > 0):
+            raise ControllerConfigError(f"{key} must be a number > 0, got {value!r}", key)
+        if CONTROLLER_KEYS[key] is str and not isinstance(value, str):
+            raise ControllerConfigError(f"{key} must be a string, got {value!r}", key)
+    kind = config.get("kind", "pid")
+    if kind not in KINDS:
+        raise ControllerConfigError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}",
+                                    "kind" if "kind" in config else "name")
+
+
+def _nominal_of(params: JointParams, nominal: JointParams | None) -> JointParams:
+    return nominal if nominal is not None else preset(params.name)
+
+
+@functools.lru_cache(maxsize=8)
+def _pid(nominal: JointParams) -> Any:
+    return S.motor_pid(nominal)[0]
+
+
+@functools.lru_cache(maxsize=8)
+def _tracking_design(nominal: JointParams, quick: bool, wg_rev_s: float) -> TrackingDesign:
+    return tracking_design(nominal, settings(quick), wg_rev_s)
+
+
+def _controller(config: Mapping[str, Any], scenario: str, nominal: JointParams,
+                cfg: dict[str, float], design: TrackingDesign | None = None) -> Any | None:
+    """The config's controller designed on ``nominal``; None if the kind sits this one out."""
+    check_controller(config)
+    kind = str(config.get("kind", "pid"))
+    if scenario not in KINDS[kind]:
+        return None
+    pid = design.pid if design is not None else _pid(nominal)
+    return controller_for(kind, nominal, pid, cfg, tracking=design,
+                          dob_bandwidth_hz=config.get("dob_bandwidth_hz"),
+                          rc_gain=config.get("rc_gain"))
+
+
+@functools.lru_cache(maxsize=64)
+def _pid_tracking_rms(params: JointParams, nominal: JointParams, quick: bool, wg_rev_s: float,
+                      seed: int) -> float:
+    cfg = settings(quick)
+    d = _tracking_design(nominal, quick, wg_rev_s)
+    run = S.closed_loop(params, d.pid, cfg["track_duration"], d.reference, seed=seed)
+    return S.rms(run.error[tracking_window(run, cfg)])
+
+
+def sweep_tracking(params: JointParams, controller: Mapping[str, Any], seed: int = 0,
+                   quick: bool = False, nominal: JointParams | None = None,
+                   wg_rev_s: float = 0.0) -> dict[str, float]:
+    """Slow constant-speed tracking (benchmark 1): ``rms_error_arcsec``, ``max_error_arcsec``
+    of the true output error from ``eval_start`` s to the end of the run, ``reduction_pct``
+    of the RMS against the PID alone on the same drive and seed.
+
+    ``wg_rev_s`` (WG rev/s; default the benchmark's plotted speed per joint,
+    :data:`PRIMARY`). PID, KE model (identified from a separate PID record)
+    and learnt orders come from the nominal drive; kinds ``pid``, ``pid+ke``,
+    ``pid+ke-shift``, ``pid+repetitive``, ``pid+dob``.
+    """
+    nominal = _nominal_of(params, nominal)
+    speed = float(wg_rev_s) or PRIMARY.get(nominal.name, 1.0)
+    cfg = settings(quick)
+    design = _tracking_design(nominal, quick, speed)
+    ctl = _controller(controller, "tracking", nominal, cfg, design)
+    run = S.closed_loop(params, ctl, cfg["track_duration"], design.reference, seed=seed)
+    e = run.error[tracking_window(run, cfg)]
+    rms = S.rms(e)
+    base = rms if ctl is design.pid else _pid_tracking_rms(params, nominal, quick, speed, seed)
+    return {"rms_error_arcsec": rms * _ARCSEC,
+            "max_error_arcsec": float(np.abs(e).max()) * _ARCSEC,
+            "reduction_pct": 100 * (1 - rms / base)}
+
+
+@functools.lru_cache(maxsize=64)
+def _pid_load_peak(params: JointParams, nominal: JointParams, quick: bool, seed: int) -> float:
+    cfg = settings(quick)
+    t, load, _ = load_profile(nominal, cfg)
+    return load_step_peak(load_step_run(params, _pid(nominal), cfg, load, seed), t, cfg)
+
+
+def sweep_load_step(params: JointParams, controller: Mapping[str, Any], seed: int = 0,
+                    quick: bool = False, nominal: JointParams | None = None
+                    ) -> dict[str, float]:
+    """Load-torque step while holding position (benchmark 2): ``peak_deviation_arcsec``,
+    ``recovery_s`` (until the deviation stays within 10 % of the PID's peak on the same drive
+    of its final value; inf: not within the run), ``reduction_pct`` of the peak against the
+    PID alone on the same drive and seed, ``peak_current_A``, ``chatter_A`` (RMS change of the
+    current command per sample).
+
+    The step (40 % of the nominal peak motor torque x ratio) and the
+    controller come from the nominal drive; kinds ``pid``, ``pid+dob`` (other
+    kinds return no metrics).
+    """
+    nominal = _nominal_of(params, nominal)
+    cfg = settings(quick)
+    ctl = _controller(controller, "load_step", nominal, cfg)
+    if ctl is None:
+        return {}
+    t, load, _ = load_profile(nominal, cfg)
+    run = load_step_run(params, ctl, cfg, load, seed)
+    base = _pid_load_peak(params, nominal, quick, seed)
+    m = load_step_metrics(run, t, nominal.integration.ctrl_dt, cfg, 0.1 * base)
+    return {"peak_deviation_arcsec": m["peak"] * _ARCSEC, "recovery_s": m["recovery"],
+            "reduction_pct": 100 * (1 - m["peak"] / base),
+            "peak_current_A": m["peak_current"], "chatter_A": m["chatter"]}
+
+
+def sweep_point_to_point(params: JointParams, controller: Mapping[str, Any], seed: int = 0,
+                         quick: bool = False, nominal: JointParams | None = None
+                         ) -> dict[str, float]:
+    """Minimum-jerk move of 0.5 output rad in 1 s (benchmark 3): ``overshoot_pct``,
+    ``settling_s`` (to ±1 mrad after the reference move ends; inf, left out of the
+    statistics: never settles in the run), ``peak_current_A``, ``final_error_arcsec``.
+
+    Controller designed on the nominal drive; kinds ``pid``, ``pid+dob``
+    (other kinds return no metrics).
+    """
+    nominal = _nominal_of(params, nominal)
+    cfg = settings(quick)
+    ctl = _controller(controller, "point_to_point", nominal, cfg)
+    if ctl is None:
+        return {}
+    m = point_to_point_metrics(point_to_point_run(params, ctl, cfg, seed))
+    return {"overshoot_pct": m["overshoot_pct"], "settling_s": m["settling_time"],
+            "peak_current_A": m["peak_current"],
+            "final_error_arcsec": abs(m["final_error"]) * _ARCSEC}
+
+
+#: ``hdgym sweep`` scenarios ``controllers:NAME``; see :mod:`hdgym.sweep.scenarios`
+SCENARIOS: dict[str, Callable[..., dict[str, float]]] = {
+    "tracking": sweep_tracking,
+    "load_step": sweep_load_step,
+    "point_to_point": sweep_point_to_point,
+}
 
 
 # ------------------------------------------------------------------ figures

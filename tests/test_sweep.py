@@ -305,15 +305,12 @@ def test_results_csv_is_plain_csv(tmp_path: Path, spec_file: Path) -> None:
 CTRL_SPEC = """\
 [sweep]
 presets = ["tuttle-joint2"]
-scenarios = ["controllers:ramp"]
+scenarios = ["controllers:load_step"]
 seeds = [0]
 quick = true
 
 [spreads]
 "compliance.stiffness" = 0.3
-
-[scenario."controllers:ramp"]
-quick_duration = 0.3
 
 [[controllers]]
 name = "pid"
@@ -322,23 +319,38 @@ kind = "pid"
 [[controllers]]
 name = "dob"
 kind = "pid+dob"
+
+[[controllers]]
+name = "ke"
+kind = "pid+ke"
 """
 
 
 @pytest.mark.skipif(importlib.util.find_spec("controllers") is None,
                     reason="the controllers package is not importable")
 def test_controllers_meet_the_same_drive(tmp_path: Path) -> None:
+    assert {"controllers:tracking", "controllers:load_step",
+            "controllers:point_to_point"} <= set(scenario_names())
     f = tmp_path / "ctl.toml"
     f.write_text(CTRL_SPEC)
     res = run_sweep(f, tmp_path / "out", workers=1, progress=False, summarize=False)
-    assert (res.ran, res.errors) == (2, 0)
-    rows = list(_rows(tmp_path / "out").values())
-    assert {r["controller"] for r in rows} == {"pid", "dob"}
-    assert len({r["param:compliance.stiffness"] for r in rows}) == 1  # common random numbers
-    assert all(0 < float(r["rms_error"]) < 0.1 for r in rows)
+    assert (res.ran, res.errors) == (3, 0)
+    rows = {r["controller"]: r for r in _rows(tmp_path / "out").values()}
+    assert set(rows) == {"pid", "dob", "ke"}
+    assert len({r["param:compliance.stiffness"] for r in rows.values()}) == 1  # common numbers
+    assert float(rows["pid"]["reduction_pct"]) == 0.0  # its own baseline
+    assert 0 < float(rows["dob"]["peak_deviation_arcsec"]) < float(
+        rows["pid"]["peak_deviation_arcsec"])
+    assert rows["ke"]["peak_deviation_arcsec"] == ""  # KE feedforward sits the load step out
     bad = tmp_path / "bad.toml"
     bad.write_text(CTRL_SPEC.replace('kind = "pid+dob"', 'kind = "lqr"'))
-    with pytest.raises(ValueError, match=r"bad\.toml, line 19: \[\[controllers\]\] 'dob': kind"):
+    with pytest.raises(ValueError, match=r"bad\.toml, line 16: \[\[controllers\]\] 'dob': kind"):
+        load_spec(bad)
+    bad.write_text(CTRL_SPEC.replace('kind = "pid+dob"', 'kind = "pid+dob"\ndob_bandwidth_hz = -1'))
+    with pytest.raises(ValueError, match=r"line 17: .*dob_bandwidth_hz must be a number > 0"):
+        load_spec(bad)
+    bad.write_text(CTRL_SPEC + '[scenario."controllers:load_step"]\nspeed = 1.0\n')
+    with pytest.raises(ValueError, match=r"unknown option 'speed'"):
         load_spec(bad)
 
 

@@ -7,9 +7,10 @@ inputs. Three families:
 
 * built-in open-loop scenarios that need only the simulator
   (``current_steps``, ``locked_random``);
-* ``controllers:NAME`` -- the scenario ``NAME`` of :mod:`controllers.benchmark`,
-  run with each ``[[controllers]]`` config of the spec (imported lazily, when
-  a spec names one);
+* ``controllers:NAME`` -- the scenario ``NAME`` of
+  ``controllers.benchmark.SCENARIOS``, run with each ``[[controllers]]``
+  config of the spec, designed on the nominal drive (imported lazily, when a
+  spec names one; see the adapter below);
 * ``package.module:function`` -- any importable function ``(params, job) ->
   metrics``; imported lazily in the workers, so it works on a process pool
   and on Ray nodes (a function registered only in ``__main__`` would not);
@@ -314,6 +315,20 @@ def rl_train(params: JointParams, job: Any) -> dict[str, float]:
 
 
 # ------------------------------------------------- controllers.benchmark adapter
+#
+# ``controllers:NAME`` runs ``controllers.benchmark.SCENARIOS[NAME]`` once per
+# ``[[controllers]]`` config. The function is called with the keyword
+# arguments it accepts of: ``params`` (the job's randomized drive),
+# ``nominal`` (the preset at the grid point, no spreads: what a controller is
+# designed on), ``controller`` (the config), ``seed``, ``rng``, ``quick``,
+# ``options`` and each scenario option by name. Its keyword parameters other
+# than those are the scenario's options (defaults checked by type); a
+# function taking ``**kwargs`` gets any option unchecked.
+# ``controllers.benchmark.check_controller(config)`` validates each config
+# before the sweep (a ValueError; its ``key`` attribute, if any, names the
+# offending key for the spec's line number).
+
+_PASSED = ("params", "nominal", "controller", "seed", "rng", "quick", "options")
 
 
 def _benchmark() -> Any | None:
@@ -324,20 +339,14 @@ def _benchmark() -> Any | None:
     return benchmark
 
 
-def _controller_scenarios() -> list[str]:
+def _benchmark_table() -> Mapping[str, Any] | None:
     bm = _benchmark()
     table = getattr(bm, "SCENARIOS", None) if bm is not None else None
-    if isinstance(table, Mapping):
-        return sorted(table)
-    return sorted(_FALLBACK) if _building_blocks() else []
+    return table if isinstance(table, Mapping) else None
 
 
-def _building_blocks() -> bool:
-    try:
-        import controllers.scenarios  # noqa: F401
-    except ImportError:
-        return False
-    return True
+def _controller_scenarios() -> list[str]:
+    return sorted(_benchmark_table() or {})
 
 
 def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
@@ -348,68 +357,14 @@ def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
     return fn(**{k: v for k, v in kwargs.items() if k in sig.parameters})
 
 
-def _controller_scenario(name: str) -> Scenario:
-    bm = _benchmark()
-    table = getattr(bm, "SCENARIOS", None) if bm is not None else None
-    if not isinstance(table, Mapping):
-        if name in _FALLBACK and _building_blocks():
-            return _FALLBACK[name]
-        raise ValueError(f"unknown scenario 'controllers:{name}' (the controllers package "
-                         f"is not importable, or controllers.benchmark has no SCENARIOS table "
-                         f"and {name!r} is not one of the built-in {sorted(_FALLBACK)})")
-    if name not in table:
-        raise ValueError(f"unknown scenario 'controllers:{name}'")
-    bench_fn = table[name]
-    check = getattr(bm, "check_controller", None)
-
-    def run(params: JointParams, job: Any) -> Mapping[str, float]:
-        config = dict(job.controller or {})
-        metrics = _call(bench_fn, {"params": params, "controller": config, "seed": job.run_seed(),
-                                   "rng": job.run_rng(), "quick": job.quick,
-                                   "options": dict(job.options), **dict(job.options)})
-        return {k: float(v) for k, v in dict(metrics).items()}
-
-    def check_slot(config: Mapping[str, Any]) -> None:
-        if callable(check):
-            check(dict(config))
-
-    return Scenario(f"controllers:{name}", run, needs="controller", options=None,
-                    check_slot=check_slot, doc=(bench_fn.__doc__ or "").strip())
-
-
-# ------------------------------------------- controllers from the building blocks
-#
-# Used while controllers.benchmark has no SCENARIOS table: closed-loop runs
-# built from controllers.scenarios (closed_loop, motor_pid, ramp, min_jerk).
-# Each controller is designed on the *nominal* drive (the preset at the grid
-# point, no spreads) and run on the job's randomized drive: the sweep measures
-# robustness to the variation, not re-tuning.
-
-CONTROLLER_KEYS: dict[str, Any] = {
-    "name": "", "kind": "", "crossover_hz": 0.0, "phase_margin_deg": 0.0,
-    "dob_bandwidth_hz": 0.0, "orders": [], "gain": 0.0,
-}
-CONTROLLER_KINDS = ("pid", "pid+dob", "pid+repetitive")
-
-
-def _check_controller(config: Mapping[str, Any]) -> None:
-    for key, value in config.items():
-        if key not in CONTROLLER_KEYS:
-            raise OptionError(f"unknown key {key!r}; known: {', '.join(sorted(CONTROLLER_KEYS))}",
-                              key)
-        default = CONTROLLER_KEYS[key]
-        if isinstance(default, float) and not (isinstance(value, (int, float))
-                                               and not isinstance(value, bool) and value > 0):
-            raise OptionError(f"{key} must be a number > 0, got {value!r}", key)
-        if isinstance(default, list) and not (isinstance(value, list) and value and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
-                for v in value)):
-            raise OptionError(f"{key} must be a non-empty list of numbers > 0, got {value!r}",
-                              key)
-    kind = config.get("kind", "pid")
-    if kind not in CONTROLLER_KINDS:
-        raise OptionError(f"kind must be one of {', '.join(CONTROLLER_KINDS)}, got {kind!r}",
-                          "kind" if "kind" in config else "name")
+def _signature_options(fn: Callable[..., Any]) -> dict[str, Any] | None:
+    """Options of a benchmark function: its keyword parameters with defaults, not passed."""
+    sig = inspect.signature(fn)
+    if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        return None
+    return {n: p.default for n, p in sig.parameters.items()
+            if n not in _PASSED and p.default is not inspect.Parameter.empty
+            and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
 def _nominal(job: Any) -> JointParams:
@@ -420,80 +375,32 @@ def _nominal(job: Any) -> JointParams:
     return p
 
 
-def build_controller(config: Mapping[str, Any], nominal: JointParams) -> Any:
-    """A controller of ``config`` (see :data:`CONTROLLER_KEYS`) designed on ``nominal``."""
-    from controllers.dob import DisturbanceObserver
-    from controllers.repetitive import RepetitiveController
-    from controllers.scenarios import half_count, motor_pid
+def _controller_scenario(name: str) -> Scenario:
+    bm = _benchmark()
+    table = _benchmark_table()
+    if table is None:
+        raise ValueError(f"unknown scenario 'controllers:{name}' (the controllers package is "
+                         f"not importable, or controllers.benchmark has no SCENARIOS table)")
+    if name not in table:
+        raise ValueError(f"unknown scenario 'controllers:{name}'")
+    bench_fn = table[name]
+    check = getattr(bm, "check_controller", None)
+    options = _signature_options(bench_fn)
 
-    pid, _ = motor_pid(nominal, config.get("crossover_hz"),
-                       float(config.get("phase_margin_deg", 45.0)))
-    kind = config.get("kind", "pid")
-    if kind == "pid":
-        return pid
-    if kind == "pid+dob":
-        j = nominal.motor.inertia + nominal.load.inertia / nominal.ratio**2
-        return DisturbanceObserver(pid, j, nominal.motor.torque_constant,
-                                   float(config.get("dob_bandwidth_hz", 30.0)),
-                                   nominal.integration.ctrl_dt,
-                                   current_limit=nominal.amplifier.current_limit)
-    if kind == "pid+repetitive":
-        return RepetitiveController(pid, nominal.ratio, tuple(config.get("orders", (1, 2, 4))),
-                                    float(config.get("gain", 0.5)), start=0.2,
-                                    output_offset=half_count(nominal.sensors.output_counts))
-    raise ValueError(f"unknown controller kind {kind!r}")
+    def run(params: JointParams, job: Any) -> Mapping[str, float]:
+        config = dict(job.controller or {})
+        opts = {**(options or {}), **dict(job.options)}
+        metrics = _call(bench_fn, {"params": params, "nominal": _nominal(job),
+                                   "controller": config, "seed": job.run_seed(),
+                                   "rng": job.run_rng(), "quick": job.quick,
+                                   "options": dict(job.options), **opts})
+        return {k: float(v) for k, v in dict(metrics).items()}
 
+    run.__doc__ = bench_fn.__doc__  # the summary quotes it
 
-def _tracking_metrics(run: Any, settle: float) -> dict[str, float]:
-    t = run.time
-    e = run.error
-    late = t >= settle
-    cur = np.asarray(run.record.columns["current_command"])
-    return {"rms_error": float(np.sqrt(np.mean(e[late] ** 2))),
-            "max_error": float(np.max(np.abs(e[late]))),
-            "final_error": float(abs(e[-1])),
-            "rms_current": float(np.sqrt(np.mean(cur**2))),
-            "peak_current": float(np.max(np.abs(cur)))}
+    def check_slot(config: Mapping[str, Any]) -> None:
+        if callable(check):
+            check(dict(config))
 
-
-def _ramp(params: JointParams, job: Any) -> dict[str, float]:
-    """Output ramp at ``speed`` output rad/s: true output error ``rms_error``, ``max_error``,
-    ``final_error`` (output rad, after ``settle`` s), ``rms_current``, ``peak_current`` (A).
-    """
-    from controllers.scenarios import closed_loop, ramp
-
-    sc = _FALLBACK["ramp"]
-    duration = _duration(sc, job)
-    ctl = build_controller(dict(job.controller or {}), _nominal(job))
-    run = closed_loop(params, ctl, duration, ramp(float(sc.option(job, "speed")),
-                                                  ramp_time=min(0.5, duration / 4)),
-                      seed=job.run_seed())
-    return _tracking_metrics(run, min(float(sc.option(job, "settle")), duration / 2))
-
-
-def _point_to_point(params: JointParams, job: Any) -> dict[str, float]:
-    """Minimum-jerk move of ``distance`` output rad in ``move_time`` s (from 0.05 s; quick runs
-    keep the move and end 0.25 s after it at the latest): true output error
-    ``rms_error``, ``max_error``, ``final_error`` (output rad), ``rms_current``,
-    ``peak_current`` (A).
-    """
-    from controllers.scenarios import closed_loop, min_jerk
-
-    sc = _FALLBACK["point_to_point"]
-    duration = _duration(sc, job)
-    move = min(float(sc.option(job, "move_time")), duration - 0.25)
-    ctl = build_controller(dict(job.controller or {}), _nominal(job))
-    run = closed_loop(params, ctl, duration, min_jerk(float(sc.option(job, "distance")), 0.05,
-                                                      move), seed=job.run_seed())
-    return _tracking_metrics(run, 0.0)
-
-
-_FALLBACK: dict[str, Scenario] = {
-    "ramp": Scenario("controllers:ramp", _ramp, "controller",
-                     {"speed": 0.2, "duration": 2.0, "quick_duration": 0.6, "settle": 0.5},
-                     _check_controller, (_ramp.__doc__ or "").strip()),
-    "point_to_point": Scenario("controllers:point_to_point", _point_to_point, "controller",
-                               {"distance": 0.1, "move_time": 0.5, "duration": 1.5,
-                                "quick_duration": 0.8}, _check_controller,
-                               (_point_to_point.__doc__ or "").strip()),
-}
+    return Scenario(f"controllers:{name}", run, needs="controller", options=options,
+                    check_slot=check_slot, doc=(bench_fn.__doc__ or "").strip())
