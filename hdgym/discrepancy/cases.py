@@ -273,8 +273,9 @@ def main(argv: list[str] | None = None) -> int:
     failed = [r for r in results if not r.passed]
     if failed:
         text += "\nCases that fail (stated, not hidden):\n\n" + "\n".join(
-            f"- {r.case.name}: found {', '.join(r.found) or 'none'}; "
-            f"{r.diagnosis.conclusion}" for r in failed) + "\n"
+            f"- {r.case.name}: hidden {', '.join(r.case.hidden) or 'none'}; "
+            f"{r.diagnosis.conclusion}; validation NMSE {r.diagnosis.nmse_before:.3g} -> "
+            f"{r.diagnosis.nmse_after:.3g} %" for r in failed) + "\n"
     atomic_write_text(Path(args.out), text)
     print(f"wrote {args.out}")
     return 0 if npass == len(results) else 1

@@ -46,7 +46,8 @@ MIN_GAIN = 0.005
 MIN_SCORE = 0.03
 """Least share of the residual a linearized refit must explain for a trial refit."""
 VALIDATION_GAIN = 0.1
-"""With a validation record, an effect must also cut its NMSE by this share (10 %)."""
+"""With a validation record, an effect must also cut its NMSE by this share (10 %, geometric
+mean over channels of the NMSE ratio)."""
 TOP_K = 3
 NESTED = {"stribeck_friction": "stiction"}
 """Effect -> simpler effect that is its limit case (preferred when it does nearly as well)."""
@@ -345,41 +346,55 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
             trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
         trials.sort(key=lambda t: t[0])
-        cost, best, res = trials[0]
         # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
         # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
-        simpler = NESTED.get(best["name"])
+        simpler = NESTED.get(trials[0][1]["name"])
         by_name = {c["name"]: c for c in candidates}
         if simpler in by_name:
             if "relative_improvement" not in by_name[simpler]:
                 trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
                                      nfev_trial))
-            alt = next(t for t in trials if t[1]["name"] == simpler)
-            if alt[1]["relative_improvement"] >= PARSIMONY * best["relative_improvement"]:
-                cost, best, res = alt
-        rel = best["relative_improvement"]
-        gain = current.nmse["mean"] - res.nmse["mean"]
-        if rel < threshold or gain < MIN_GAIN:
-            conclusion = (f"nothing (more) worth adding: the best candidate, {best['name']}, "
-                          f"would cut the cost by {100 * rel:.1f} % (threshold "
-                          f"{100 * threshold:.0f} %) and the mean NMSE by {gain:.3g} points "
-                          f"(threshold {MIN_GAIN:g})")
+            k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
+            if (trials[k][1]["relative_improvement"]
+                    >= PARSIMONY * trials[0][1]["relative_improvement"]):
+                trials.insert(0, trials.pop(k))
+        accepted = None
+        reasons = []
+        for _, best, res in trials:  # the best candidate that passes every check
+            rel = best["relative_improvement"]
+            gain = current.nmse["mean"] - res.nmse["mean"]
+            if rel < threshold or gain < MIN_GAIN:
+                reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
+                               f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
+                               f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+                continue
+            polished = fit(problem, res.params,
+                           model_params(res.params, problem.scales, params), max_nfev=nfev_polish)
+            if polished.cost > res.cost:
+                polished = res
+            if vprob is not None:
+                # hold-out check: an effect that fits the training record better but does not
+                # carry over to the validation record fits noise or the fit's slack; per
+                # channel and scale-free (geometric mean of the NMSE ratios), so a channel
+                # with a tiny variance cannot decide alone
+                v_now = vprob.nmse(current.params)
+                v_new = vprob.nmse(polished.params)
+                ratios = [v_new[k] / v_now[k] for k in vprob.names
+                          if v_now[k] > 0 and math.isfinite(v_now[k])]
+                ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
+                         if ratios else 1.0)
+                if not ratio <= 1.0 - VALIDATION_GAIN:
+                    reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
+                                   f"but the validation NMSE only by a factor {ratio:.2f} per "
+                                   f"channel (geometric mean; needs <= "
+                                   f"{1 - VALIDATION_GAIN:.2f})")
+                    continue
+            accepted = (best, polished, rel)
             break
-        polished = fit(problem, res.params, model_params(res.params, problem.scales, params),
-                       max_nfev=nfev_polish)
-        if polished.cost > res.cost:
-            polished = res
-        if vprob is not None:
-            # hold-out check: an effect that fits the training record better but does not
-            # carry over to the validation record is fitting the noise or the fit's slack
-            v_now = vprob.nmse(current.params)["mean"]
-            v_new = vprob.nmse(polished.params)["mean"]
-            if not v_new <= (1.0 - VALIDATION_GAIN) * v_now:
-                conclusion = (f"nothing (more) worth adding: the best candidate, {best['name']}, "
-                              f"cuts the training cost by {100 * rel:.1f} % but the validation "
-                              f"NMSE only from {v_now:.3g} % to {v_new:.3g} % (needs "
-                              f"{100 * VALIDATION_GAIN:.0f} % less)")
-                break
+        if accepted is None:
+            conclusion = "nothing (more) worth adding: " + "; ".join(reasons)
+            break
+        best, polished, rel = accepted
         eff = REGISTRY[best["name"]]
         values = {fp.path: get_value(polished.params, fp.path)
                   for fp in eff.fit_params(polished.params, problem.scales)}
