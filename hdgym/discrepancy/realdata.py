@@ -178,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
     # the two sweep cycles: fit on the first, validate on the second
     tm = float(rec.time[len(rec) // 2])
     train, val = rec.slice(None, tm), rec.slice(tm, None)
+    train = Record(dict(train.columns), dict(train.meta),
+                   f"{sweeps[0]} (first sweep cycle, t < {tm:.1f} s)")
+    val = Record(dict(val.columns), dict(val.meta),
+                 f"{sweeps[0]} (second sweep cycle, t >= {tm:.1f} s)")
     diag = diagnose(train, params, val, mode="inverse", fit_window=None)
     notes = _notes(diag, data, kt_out)
     notes.append("Base model: zxf17-50.toml in this folder (written by the same command); the "

@@ -195,9 +195,11 @@ def _regressors(kind: str, c: Context) -> np.ndarray:
     ws = max(float(np.std(w)), 1e-12)
     sgn = np.tanh(w / (0.02 * ws))
     if kind in ("order_lines_te", "order_lines_speed"):
+        # a friction ripple opposes the motion: its lines flip sign with the direction
+        flip = sgn if kind == "order_lines_speed" else 1.0
         cols = []
         for n in (1, 2, 3, 4, 6, 8):
-            cols += [np.sin(n * c.theta_m), np.cos(n * c.theta_m)]
+            cols += [flip * np.sin(n * c.theta_m), flip * np.cos(n * c.theta_m)]
         return np.column_stack(cols)
     if kind == "sign_steps":
         return sgn[:, None]

@@ -398,6 +398,11 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         eff = REGISTRY[best["name"]]
         values = {fp.path: get_value(polished.params, fp.path)
                   for fp in eff.fit_params(polished.params, problem.scales)}
+        for path in [k for k in values if k.endswith(".sin")]:  # also as amplitude and phase
+            item = path[: -len(".sin")]
+            values[item + ".amplitude"] = get_value(polished.params, item + ".amplitude")
+            values[item + ".phase"] = get_value(polished.params, item + ".phase")
+            values[item + ".order"] = get_value(polished.params, item + ".order")
         evidence = {"signature": best["signature"], "detail": best["detail"],
                     "signature_explained": best["signature_explained"],
                     "sensitivity_explained": best["sensitivity_explained"],
