@@ -197,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _notes(diag, data: Path, kt_out: float) -> list[str]:
-    from .registry import get_value
+    from .registry import ANCHOR_FACTOR, get_value
 
     p = diag.after.params
     fo = p.friction.output
@@ -211,7 +211,15 @@ def _notes(diag, data: Path, kt_out: float) -> list[str]:
         "the pauses at the ends are left out, where friction is set-valued).",
         f"Fitted running (Coulomb) friction: {fo.coulomb:.2f} N m at the output "
         f"(owner: kinetic friction 4.1-4.4 N m at 0.05 output rev/s); viscous "
-        f"{fo.viscous:.3g} N m s/rad.",
+        f"{fo.viscous:.3g} N m s/rad"
+        + (" (at the edge of the range the fit allows, the starting 2.0 divided by "
+           f"{ANCHOR_FACTOR:g}: a sweep at one speed cannot separate viscous from Coulomb "
+           "friction, so treat Coulomb + viscous x speed = "
+           f"{fo.coulomb + fo.viscous * 2 * math.pi * 0.05:.2f} N m at 0.05 rev/s as the "
+           "measured running friction)." if abs(fo.viscous * ANCHOR_FACTOR - 2.0) < 1e-6
+           else "."),
+        "Inertias are not informed by a slow sweep (accelerations are tiny once reversals "
+        "are masked).",
     ]
     for k, r in enumerate(fo.ripple):
         notes.append(f"Friction ripple {k + 1}: {r.amplitude:.2f} N m at order {r.order:g} of the "
