@@ -501,22 +501,21 @@ class JointParams:
         return replace(self, effects=check_effects(tuple(self.effects) + tuple(effects)))
 
     def get(self, path: str) -> Any:
-        """Value at a dotted path such as ``compliance.stiffness``."""
+        """Value at a dotted path such as ``compliance.stiffness`` or
+        ``friction.input.ripple[0].amplitude`` (the paths of :func:`numeric_paths`)."""
         obj: Any = self
         for part in path.split("."):
-            if not hasattr(obj, part):
+            name, index = _split_index(part, path)
+            if not is_dataclass(obj) or not hasattr(obj, name) or name == "sources":
                 raise ValueError(f"unknown parameter {path!r}")
-            obj = getattr(obj, part)
+            obj = getattr(obj, name)
+            if index is not None:
+                obj = _item(obj, index, path)
         return obj
 
     def set(self, path: str, value: Any) -> JointParams:
         """A copy with the dotted ``path`` set to ``value`` (validated)."""
-        head, _, rest = path.partition(".")
-        if not hasattr(self, head) or head in ("sources",):
-            raise ValueError(f"unknown parameter {path!r}")
-        if not rest:
-            return replace(self, **{head: value})
-        return replace(self, **{head: _set_in(getattr(self, head), rest, value, path)})
+        return _set_in(self, path.split("."), value, path)
 
     def perturb(self, rng: Any, spreads: Mapping[str, float]) -> JointParams:
         """A copy with each numeric parameter scaled by ``1 + spread * U(-1, 1)``.
@@ -540,13 +539,34 @@ class JointParams:
         return out
 
 
-def _set_in(obj: Any, path: str, value: Any, full: str) -> Any:
-    head, _, rest = path.partition(".")
-    if not is_dataclass(obj) or not hasattr(obj, head):
+def _split_index(part: str, full: str) -> tuple[str, int | None]:
+    """``"ripple[1]"`` -> ``("ripple", 1)``; ``"coulomb"`` -> ``("coulomb", None)``."""
+    if not part.endswith("]"):
+        return part, None
+    name, _, index = part[:-1].partition("[")
+    if not index.isdigit():
         raise ValueError(f"unknown parameter {full!r}")
-    if rest:
-        value = _set_in(getattr(obj, head), rest, value, full)
-    return replace(obj, **{head: value})
+    return name, int(index)
+
+
+def _item(seq: Any, index: int, full: str) -> Any:
+    if not isinstance(seq, tuple) or index >= len(seq):
+        raise ValueError(f"unknown parameter {full!r}")
+    return seq[index]
+
+
+def _set_in(obj: Any, parts: list[str], value: Any, full: str) -> Any:
+    name, index = _split_index(parts[0], full)
+    if not is_dataclass(obj) or not hasattr(obj, name) or name == "sources":
+        raise ValueError(f"unknown parameter {full!r}")
+    current = getattr(obj, name)
+    if index is None:
+        new = _set_in(current, parts[1:], value, full) if parts[1:] else value
+    else:
+        item = _item(current, index, full)
+        item = _set_in(item, parts[1:], value, full) if parts[1:] else value
+        new = current[:index] + (item,) + current[index + 1:]
+    return replace(obj, **{name: new})
 
 
 # ---------------------------------------------------------------- TOML in/out

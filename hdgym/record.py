@@ -72,7 +72,10 @@ KNOWN_COLUMNS: tuple[str, ...] = (
 )
 REQUIRED_COLUMNS: tuple[str, ...] = ("time", "motor_angle")
 META_KEYS: tuple[str, ...] = ("ratio", "configuration", "locked_output", "preset", "source",
-                              "units")
+                              "units", "kind")
+#: ``# kind: command`` marks a command file (an experiment protocol to run on a
+#: rig or the simulator): it needs only ``time`` and ``current_command``.
+COMMAND_COLUMNS: tuple[str, ...] = ("time", "current_command")
 DT_RTOL = 0.01
 """Allowed deviation of any time step from the median step, relative to it."""
 
@@ -146,6 +149,10 @@ def _check_meta(key: str, value: str, where: str) -> None:
         if value not in GROUNDED:
             raise RecordError(f"{where}: metadata 'configuration' must name the grounded port, "
                               f"one of {', '.join(GROUNDED)}; got {value!r}")
+    elif key == "kind":
+        if value not in ("record", "command"):
+            raise RecordError(f"{where}: metadata 'kind' must be record or command, "
+                              f"got {value!r}")
     elif key == "units":
         if value.upper() != "SI":
             raise RecordError(f"{where}: metadata 'units' must be SI ({_UNITS}), got {value!r}; "
@@ -177,6 +184,8 @@ def _check_column_name(name: Any, source: str) -> str:
 
 
 def _required(meta: Mapping[str, str]) -> tuple[str, ...]:
+    if meta.get("kind", "record").strip() == "command":
+        return COMMAND_COLUMNS
     return REQUIRED_COLUMNS if _is_locked(meta) else REQUIRED_COLUMNS + ("output_angle",)
 
 
@@ -358,8 +367,8 @@ class Record:
 
     @property
     def motor_angle(self) -> np.ndarray:
-        """rad, input (WG) encoder."""
-        return self.columns["motor_angle"]
+        """rad, input (WG) encoder (a command file has none: RecordError)."""
+        return self.column("motor_angle")
 
     @property
     def output_angle(self) -> np.ndarray | None:

@@ -212,8 +212,9 @@ class Simulator:
             cols["output_velocity"] = ch["output_velocity"]
         if self.params.sensors.torque_sensor or not self.sensors:
             cols["output_torque"] = ch["output_torque"]
-        cols["load_torque"] = tl + self.params.load.torque + self.params.load.gravity * np.sin(
-            states[:, L.TH_O])
+        # the external load applied (the input a re-simulation needs); the model's own
+        # constant load and gravity arm are parameters, not record columns
+        cols["load_torque"] = tl
         cols.update(extra or {})
         meta = {
             "ratio": repr(self.params.ratio),

@@ -298,3 +298,17 @@ def test_set_validates(presets):
         p.set("motor.inertia", -1.0)
     with pytest.raises(ValueError, match="unknown parameter"):
         p.set("motor.mass", 1.0)
+
+
+def test_indexed_paths_get_and_set():
+    from hdgym.params import numeric_paths
+
+    p = preset("tuttle-joint1")
+    for path in numeric_paths(p):
+        assert p.set(path, p.get(path)) == p, path
+    ripple = "friction.output.ripple[0].amplitude"
+    assert p.set(ripple, 0.0).get(ripple) == 0.0
+    with pytest.raises(ValueError, match="unknown parameter"):
+        p.get("kinematic_error.harmonics[99].order")
+    with pytest.raises(ValueError, match="unknown parameter"):
+        p.set("motor.inertia[0]", 1.0)

@@ -465,3 +465,29 @@ def test_fuzzed_csv_reads_consistently_or_fails_cleanly(ops: list) -> None:
         assert np.isfinite(rec.columns[name]).all()
     assert (np.diff(rec.time) > 0).all() and len(rec) >= 2
     assert math.isfinite(rec.dt) and rec.dt > 0
+
+
+def test_command_file_needs_only_time_and_command(tmp_path):
+    path = tmp_path / "cmd.csv"
+    path.write_text("# kind: command\ntime,current_command\n0,1.0\n0.001,1.5\n0.002,2.0\n")
+    rec = read_record(path)
+    assert rec.meta["kind"] == "command" and not rec.has("motor_angle")
+    with pytest.raises(RecordError, match="motor_angle"):
+        _ = rec.motor_angle
+    path.write_text("# kind: command\ntime,motor_angle\n0,1.0\n0.001,1.5\n")
+    with pytest.raises(RecordError, match="current_command"):
+        read_record(path)
+    path.write_text("# kind: protocol\ntime,current_command\n0,1.0\n0.001,1.5\n")
+    with pytest.raises(RecordError, match="'kind'"):
+        read_record(path)
+
+
+def test_command_file_drives_the_simulator(tmp_path):
+    from hdgym.params import preset
+    from hdgym.sim import Simulator
+
+    path = tmp_path / "cmd.csv"
+    t = np.arange(300) * 1e-3
+    Record({"time": t, "current_command": np.full(300, 2.0)}, {"kind": "command"}).to_csv(path)
+    rec = Simulator(preset("tuttle-joint1")).run(str(path), 0.3)
+    assert np.all(rec.current_command == 2.0)

@@ -97,3 +97,11 @@ def test_commands_have_requested_shape():
         assert u.shape == t.shape and np.all(np.isfinite(u))
     assert np.isclose(np.std(command_signal("random:2:50", t)), 2.0)
     assert command_signal("ramp:0:5", t)[-1] == pytest.approx(5.0)
+
+
+def test_record_load_column_resimulates(joint):
+    """The load_torque column is the external load applied: feeding it back reproduces the run."""
+    sim = Simulator(joint, sensors=False)
+    a = sim.run("step:3", 0.3, load_torque="sine:20:5")
+    b = sim.run(a.current_command, load_torque=a.load_torque)
+    assert a == b

@@ -117,12 +117,8 @@ class Problem:
         self.counts = (float(s.motor_counts), float(s.output_counts))
         self.u = (np.asarray(rec.current_command, dtype=float) if rec.has("current_command")
                   else np.asarray(rec.motor_current, dtype=float))
-        tl = rec.load_torque
+        tl = rec.load_torque  # external load applied on top of the model's own load
         self.t_ext = np.zeros(len(rec)) if tl is None else np.asarray(tl, dtype=float).copy()
-        load = self.params.load
-        if tl is not None:  # the record's load column is the whole external load
-            th_o = rec.output_angle if rec.output_angle is not None else np.zeros(len(rec))
-            self.t_ext = self.t_ext - load.torque - load.gravity * np.sin(th_o)
         raw = R.Raw(motor_angle=np.asarray(rec.motor_angle, dtype=float),
                     output_angle=None if self.locked else rec.output_angle,
                     output_torque=rec.output_torque, motor_current=rec.motor_current)
