@@ -7,6 +7,10 @@
   (back-calculation onto the amplifier's current and back-EMF limits).
 * :class:`ConstantCurrent`: a constant normalized current command (1.0 is
   the amplifier's full current).
+* :class:`RippleCurrent`, :class:`DampingCurrent`: full current shaped
+  against the vibration, a 2x-order ripple locked to the measured WG angle
+  or active damping from the torque sensor (hand-made attempts at crossing
+  the trap without more current).
 
 Both take a batch of observations of ``HarmonicDriveResonance-v0`` and
 return a batch of actions through ``predict(obs, state, episode_start,
@@ -27,7 +31,9 @@ from hdgym.params import JointParams
 
 # observation channels of the resonance task (hdgym.envs.tasks.ResonanceTask.obs_names)
 OBS_SPEED = 0  # measured motor speed / target speed
+OBS_COS, OBS_SIN = 2, 3  # cos, sin of the measured WG angle
 OBS_TARGET = 6  # target speed / speed scale
+OBS_OSC = 7  # torque sensor minus its running mean / torque scale
 
 
 def motor_speed_model(p: JointParams) -> control.TransferFunction:
@@ -169,3 +175,68 @@ class ConstantCurrent:
                 deterministic: bool = True) -> tuple[np.ndarray, None]:
         n = np.atleast_2d(obs).shape[0]
         return np.full((n, 1), self.level, dtype=np.float32), None
+
+
+class RippleCurrent:
+    """Full current with a 2x-order ripple locked to the measured WG angle.
+
+    ``u = 1 - a + a cos(2 theta + phi)``: the ripple is at the frequency of
+    the 2x kinematic-error excitation, the phase ``phi`` (deg) sets where it
+    sits against it; the mean current is ``1 - a`` of full.
+    """
+
+    def __init__(self, amplitude: float, phase_deg: float) -> None:
+        self.amplitude = float(amplitude)
+        self.phase = math.radians(float(phase_deg))
+
+    def reset(self, n: int = 1) -> None:
+        pass
+
+    def predict(self, obs: np.ndarray, state: object = None,
+                episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        obs = np.atleast_2d(np.asarray(obs, dtype=float))
+        c, s = obs[:, OBS_COS], obs[:, OBS_SIN]
+        c2, s2 = c * c - s * s, 2.0 * c * s  # cos, sin of 2 theta
+        ripple = c2 * math.cos(self.phase) - s2 * math.sin(self.phase)
+        u = 1.0 - self.amplitude + self.amplitude * ripple
+        return u[:, None].astype(np.float32), None
+
+
+class DampingCurrent:
+    """Full current with active damping of the torsion from the torque sensor.
+
+    ``u = 1 - a + a tanh(g (cos(phi) x + sin(phi) dx / (w_n dt)))`` with
+    ``x`` the torque oscillation observation (sensor minus running mean,
+    normalized) and ``dx`` its change over one call, scaled by the
+    torsional frequency ``w_n`` (44 Hz) so both terms are alike in size;
+    ``phi`` (deg) picks the phase of the feedback (90: on the rate of the
+    torsion).
+    """
+
+    def __init__(self, amplitude: float, phase_deg: float, dt: float, gain: float = 3.0,
+                 f_n: float = 44.0) -> None:
+        self.amplitude = float(amplitude)
+        self.phase = math.radians(float(phase_deg))
+        self.gain = float(gain)
+        self.scale = 1.0 / (2.0 * math.pi * f_n * dt)
+        self.prev = np.zeros(0)
+
+    def reset(self, n: int = 1) -> None:
+        self.prev = np.zeros(0)
+
+    def predict(self, obs: np.ndarray, state: object = None,
+                episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        obs = np.atleast_2d(np.asarray(obs, dtype=float))
+        x = obs[:, OBS_OSC]
+        if self.prev.shape != x.shape:
+            self.prev = x.copy()
+        if episode_start is not None:
+            first = np.asarray(episode_start, dtype=bool)
+            self.prev[first] = x[first]
+        dx = (x - self.prev) * self.scale
+        self.prev = x.copy()
+        fb = math.cos(self.phase) * x + math.sin(self.phase) * dx
+        u = 1.0 - self.amplitude + self.amplitude * np.tanh(self.gain * fb)
+        return u[:, None].astype(np.float32), None

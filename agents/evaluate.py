@@ -19,9 +19,17 @@ Per episode, from the *true* states in ``info``:
 
 Controllers: ``policy`` (the SB3 model, deterministic), ``pi`` (PI speed
 loop, :mod:`agents.baselines`, limited by the amplifier's current and
-back-EMF limits), ``pi@4A`` (the same PI with its output limited to 4 A,
-e.g. a continuous current rating), ``full`` (constant full current),
-``const@X`` (constant X times full current) and ``const@XA`` (constant X A).
+back-EMF limits), ``pi@XA`` (the same PI with its output limited to X A,
+e.g. a continuous current rating; never above the amplifier's limit),
+``full`` (constant full current), ``const@X`` (constant X times full
+current) and ``const@XA`` (constant X A; above the amplifier's limit it
+saturates there). "The amplifier" is the env's: for
+``HarmonicDriveResonance-v0`` its ``current_limit`` (default 3.7 A), not
+the preset's 6 A, unless the config sets ``current_limit``.
+``ripple@a,phi`` and ``damp@a,phi`` are full current shaped against the
+vibration (:class:`~agents.baselines.RippleCurrent`,
+:class:`~agents.baselines.DampingCurrent`; they are meant to run with an
+action repeat of 1).
 """
 
 from __future__ import annotations
@@ -37,7 +45,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from agents.baselines import ConstantCurrent, PISpeedController
+from agents.baselines import ConstantCurrent, DampingCurrent, PISpeedController, RippleCurrent
 from agents.common import env_kwargs, load_config, load_policy, policy_config
 
 SMOOTH_S = 0.05
@@ -86,8 +94,17 @@ def controller_for(name: str, venv: Any, model: Any = None) -> Any:
         if spec.endswith("A"):  # amps
             return ConstantCurrent(float(spec[:-1]) / b.current_limit)
         return ConstantCurrent(float(spec))
+    if name.startswith(("ripple@", "damp@")):
+        kind, _, spec = name.partition("@")
+        try:
+            amp, phase = (float(v) for v in spec.split(","))
+        except ValueError:
+            raise ValueError(f"{name!r}: use {kind}@<amplitude>,<phase deg>") from None
+        if kind == "ripple":
+            return RippleCurrent(amp, phase)
+        return DampingCurrent(amp, phase, b.ctrl_dt)
     raise ValueError(f"unknown controller {name!r}; use policy, pi, pi@<A>, full, "
-                     "const@<x> or const@<A>A")
+                     "const@<x>, const@<A>A, ripple@<a>,<deg> or damp@<a>,<deg>")
 
 
 def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
@@ -203,6 +220,12 @@ def label(name: str) -> str:
         spec = name[6:]
         return f"constant {spec[:-1]} A" if spec.endswith("A") else \
             f"constant {spec} x full current"
+    if name.startswith("ripple@"):
+        a, phi = name[7:].split(",")
+        return f"full current - {a} + {a} cos(2 theta_wg + {phi} deg)"
+    if name.startswith("damp@"):
+        a, phi = name[5:].split(",")
+        return f"full current - {a} + {a} tanh(torsion feedback at {phi} deg)"
     return name
 
 

@@ -314,6 +314,39 @@ def test_unknown_names_raise():
         make(IDS[0], sensors={"motor_countz": 10})
 
 
+def test_resonance_current_limit_overrides_the_amplifier():
+    from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT
+    from hdgym.physics import layout as L
+
+    # the default sits inside Tuttle's 2.8-4.0 A velocity plateau; the preset keeps its 6 A
+    assert 2.8 <= DEFAULT_CURRENT_LIMIT <= 4.0
+    u = make(IDS[1]).unwrapped
+    assert u.params.amplifier.current_limit == DEFAULT_CURRENT_LIMIT
+    assert u.params.amplifier.voltage_limit == JOINT.amplifier.voltage_limit
+    assert JOINT.amplifier.current_limit == 6.0
+    assert make(IDS[1], current_limit=None).unwrapped.params.amplifier.current_limit == 6.0
+    for lim in (2.5, 5.0):
+        env = make(IDS[1], current_limit=lim).unwrapped
+        venv = gym.make_vec(IDS[1], num_envs=3, vectorization_mode="vector_entry_point",
+                            preset=JOINT, current_limit=lim)
+        assert env.batch.current_limit == lim and env.param_row[L.I_MAX] == lim
+        assert np.all(venv.unwrapped.batch.rows[:, L.I_MAX] == lim)
+        env.reset(seed=0)
+        venv.reset(seed=0)
+        acts = np.array([[1e6], [-1.0], [0.5]], dtype=np.float32)
+        for _ in range(30):  # 30 ms: the 500 Hz current loop has settled, back-EMF far away
+            _, _, _, _, info = env.step(np.array([1e6], dtype=np.float32))
+            _, _, _, _, vinfo = venv.step(acts)
+        assert info["motor_current"] == pytest.approx(lim, abs=1e-6)
+        np.testing.assert_allclose(vinfo["motor_current"], [lim, -lim, 0.5 * lim], atol=1e-6)
+    for bad in (0.0, -1.0, float("nan"), float("inf"), "big"):
+        with pytest.raises(ValueError, match="current_limit"):
+            make(IDS[1], current_limit=bad)
+        with pytest.raises(ValueError, match="current_limit"):
+            gym.make_vec(IDS[1], num_envs=2, vectorization_mode="vector_entry_point",
+                         preset=JOINT, current_limit=bad)
+
+
 def test_randomize_slow_path_and_tuples():
     env = make(IDS[0], randomize={"transmission.n": 0.05,
                                   "hysteresis.element_stiffness": 0.2}).unwrapped

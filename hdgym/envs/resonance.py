@@ -6,9 +6,32 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from hdgym.envs.common import HarmonicDriveEnv
+from hdgym.envs.common import HarmonicDriveEnv, resolve_params
 from hdgym.envs.tasks import ResonanceTask
 from hdgym.params import JointParams
+
+#: A, the task's amplifier current limit (see ``current_limit``)
+DEFAULT_CURRENT_LIMIT = 3.7
+
+
+def resonance_params(preset: str | JointParams | None,
+                     current_limit: float | None = DEFAULT_CURRENT_LIMIT) -> JointParams:
+    """The task's drive: the preset with its amplifier current limit set to ``current_limit``.
+
+    ``None`` keeps the preset's amplifier. The back-EMF (voltage) limit is
+    the preset's either way. Raises ``ValueError`` unless the limit is a
+    finite number > 0 A.
+    """
+    params = resolve_params(preset)
+    if current_limit is None:
+        return params
+    try:
+        limit = float(current_limit)
+    except (TypeError, ValueError):
+        raise ValueError(f"current_limit must be a number of A, got {current_limit!r}") from None
+    if not (limit > 0 and math.isfinite(limit)):
+        raise ValueError(f"current_limit must be > 0 A, got {current_limit!r}")
+    return params.set("amplifier.current_limit", limit)
 
 
 class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
@@ -19,14 +42,27 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
     torque oscillates, load-dependent tooth friction drains the motor's
     power and the mean speed stays on a plateau (PHYSICS.md §3). On Tuttle's
     joint 1 (the default preset) the 2x-order trap sits near 8,000 deg/s of
-    input speed; the target is drawn in 10,000-12,000 deg/s, so a naive
-    full-current command, limited by the amplifier's current clip and
-    back-EMF voltage limit, can stay trapped. The agent must find a way
-    through (e.g. timing the run-up, managing the oscillation).
+    input speed; the target is drawn in 10,000-12,000 deg/s.
+
+    The task's drive has a smaller amplifier than Tuttle's: its current
+    limit (``current_limit``, default 3.7 A, against the preset's 6 A) sits
+    inside the velocity plateau (Tuttle's steps of 2.8-4.0 A all settle in
+    the trap; 4.4 A and up break out), so brute-force current cannot break
+    out: constant full current (and a saturated speed controller) stays
+    below 9,000 deg/s in about 92 % of episodes randomized by +-10 % in
+    stiffness, friction and kinematic-error amplitude (3 s episodes). The
+    back-EMF voltage limit of the preset stays in force. The agent must find
+    another way through (timing the run-up, managing the oscillation), if
+    one exists: in our tests every shaped current tried (2x-order ripple
+    in phase with the WG angle, active damping of the twist from the torque
+    sensor or even from the true states, pulses, ramps) lost more speed
+    through the lower mean current than it saved in friction, and PPO
+    converged to full current (``results/rl/evaluation.md``).
 
     ## Action space
 
-    ``Box(-1, 1, (1,), float32)``: current command / ``I_max``. Values
+    ``Box(-1, 1, (1,), float32)``: current command / ``I_max`` (the task's
+    ``current_limit``). Values
     outside [-1, 1] saturate like the amplifier's input clip; NaN or
     infinite actions raise ``ValueError``. Current and back-EMF limits and
     the current loop act inside the physics.
@@ -70,8 +106,9 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
 
     * Truncation at 2000 steps (2 s at 1 ms).
     * Termination: ``|flexspline torque| > torque_limit`` (default
-      8 ``K_t I_max ratio``; a full-current run up through the resonance
-      on tuttle-joint1 peaks at about 85 % of it), ``|motor speed| > speed_limit`` (default
+      8 ``K_t I_max ratio``, 257 N m with the default 3.7 A; a full-current
+      run into the trap on tuttle-joint1 peaks at about 55 % of it),
+      ``|motor speed| > speed_limit`` (default
       1.5 ``V/K_b``) or a diverging simulation.
 
     ## Arguments
@@ -83,7 +120,12 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
 
     * ``target_speed``: motor speed, rad/s, a number or ``(low, high)``
       (default ``(radians(10000), radians(12000))``);
-    * ``oscillation_weight`` (1.0), ``torque_time_constant`` (0.05 s).
+    * ``oscillation_weight`` (1.0), ``torque_time_constant`` (0.05 s);
+    * ``current_limit``: A, the amplifier's current limit for this task,
+      replacing the preset's ``amplifier.current_limit`` (default
+      :data:`DEFAULT_CURRENT_LIMIT` = 3.7 A; ``None`` keeps the preset's
+      amplifier); must be > 0. It also sets ``I_max`` in the action and
+      observation scales and the default ``torque_limit``.
     """
 
     def __init__(self, preset: str | JointParams | None = None, without: Iterable[str] = (),
@@ -95,9 +137,11 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
                  oscillation_weight: float = 1.0, torque_time_constant: float = 0.05,
                  horizon: float = 2.0, torque_limit: float | None = None,
                  speed_limit: float | None = None, safety_penalty: float = 100.0,
-                 load_torque: float = 0.0, render_mode: str | None = None) -> None:
+                 load_torque: float = 0.0, current_limit: float | None = DEFAULT_CURRENT_LIMIT,
+                 render_mode: str | None = None) -> None:
         task = ResonanceTask(target_speed, oscillation_weight, torque_time_constant)
-        super().__init__(task, render_mode, preset=preset, without=without, ctrl_dt=ctrl_dt,
+        params = resonance_params(preset, current_limit)
+        super().__init__(task, render_mode, preset=params, without=without, ctrl_dt=ctrl_dt,
                          n_substeps=n_substeps, sensors=sensors, randomize=randomize,
                          horizon=horizon, torque_limit=torque_limit, speed_limit=speed_limit,
                          safety_penalty=safety_penalty, load_torque=load_torque)

@@ -167,5 +167,9 @@ def make_joint_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEn
 
 def make_resonance_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEnv:
     """Vector entry point of ``HarmonicDriveResonance-v0``."""
+    from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT, resonance_params
+
     task = ResonanceTask(**_split(kwargs, _RES_TASK))
+    kwargs["preset"] = resonance_params(kwargs.get("preset"),
+                                        kwargs.pop("current_limit", DEFAULT_CURRENT_LIMIT))
     return HarmonicDriveVectorEnv(task, num_envs, **kwargs)
