@@ -75,6 +75,19 @@ N_JOINT_CONST = C_TASK + 3
 N_JOINT_PARAMS = 6
 
 
+@nb.njit(cache=True, inline="always")
+def _settle(reward: float, unsafe: bool, fresh: bool, penalty: float) -> tuple[float, bool]:
+    """Final (reward, terminated): the safety penalty, no NaN reward, and nothing on the
+    step that only autoresets an env (NEXT_STEP mode)."""
+    if fresh:
+        return 0.0, False
+    if unsafe:
+        reward -= penalty
+    if not math.isfinite(reward):
+        reward = -penalty
+    return reward, unsafe
+
+
 @nb.njit(cache=True)
 def reference(t: float, p: np.ndarray) -> tuple[float, float]:
     """Output reference (rad) and its rate (rad/s) at ``t`` for parameter row ``p``."""
@@ -134,16 +147,7 @@ def post_tracking(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarr
         e = r - x[TH_O]
         cur = x[CUR] / c[C_IMAX]
         reward = 1.0 / (1.0 + abs(e) / c[J_ERR]) - c[J_WCUR] * min(cur * cur, 4.0)
-        done = _unsafe(x, bad[i], c)
-        if done:
-            reward -= c[C_PEN]
-        if not math.isfinite(reward):
-            reward = -c[C_PEN]
-        if fresh[i]:
-            reward = 0.0
-            done = False
-        rew[i] = reward
-        term[i] = done
+        rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
         aux[i, 0] = r
         aux[i, 1] = e if math.isfinite(e) else 0.0
 
@@ -273,16 +277,7 @@ def post_resonance(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndar
         speed_err = min(abs(wt - x[W_M]) / wt, 2.0)
         osc = (t_true - ts[i, 0]) / tn
         reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
-        done = _unsafe(x, bad[i], c)
-        if done:
-            reward -= c[C_PEN]
-        if not math.isfinite(reward):
-            reward = -c[C_PEN]
-        if fresh[i]:
-            reward = 0.0
-            done = False
-        rew[i] = reward
-        term[i] = done
+        rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
         aux[i, 0] = wt
         aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
 
