@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy import signal as sps
@@ -390,6 +391,16 @@ def _sim(p: JointParams, **kw):  # late import: the Record type lives in hdgym.r
     return Simulator(p, **kw)
 
 
+def _finish(item: Item, fig: Any, path: Path, ok: bool) -> Item:
+    """Save the item's figure next to the page and record the verdict."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    _plt().close(fig)
+    item.figures.append(path.name)
+    item.passed = bool(ok)
+    return item
+
+
 def check_ke(out: Path, quick: bool) -> Item:
     """(a) KE order spectrum, joints 1 and 3."""
     item = Item("a", "Kinematic-error order spectrum (Tuttle §2.2, Table 2.8)",
@@ -442,12 +453,7 @@ def check_ke(out: Path, quick: bool) -> Item:
         ax.set_xlabel("order (cycles per WG revolution)")
         ax.set_ylabel("amplitude (output °)")
         ax.set_title(f"{name}: order spectrum, p-p {pp:.4f}° (Tuttle {target}°)")
-    fig.tight_layout()
-    fig.savefig(out / "ke_spectrum.png", dpi=110)
-    plt.close(fig)
-    item.figures.append("ke_spectrum.png")
-    item.passed = bool(ok)
-    return item
+    return _finish(item, fig, out / "ke_spectrum.png", ok)
 
 
 def check_steps(out: Path, quick: bool) -> Item:
@@ -541,11 +547,7 @@ def check_steps(out: Path, quick: bool) -> Item:
     ax.set_ylabel("input speed (°/s)")
     ax.set_title("trapped and escaping steps")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "current_steps.png", dpi=110)
-    plt.close(fig)
-    item.figures.append("current_steps.png")
-    return item
+    return _finish(item, fig, out / "current_steps.png", item.passed)
 
 
 def check_resonance(out: Path, quick: bool) -> Item:
@@ -581,12 +583,7 @@ def check_resonance(out: Path, quick: bool) -> Item:
     ax.set_ylabel("|flexspline torque / current| (N m/A)")
     ax.set_title("small-signal frequency response (H1, Welch)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "resonance.png", dpi=110)
-    plt.close(fig)
-    item.figures.append("resonance.png")
-    item.passed = bool(ok)
-    return item
+    return _finish(item, fig, out / "resonance.png", ok)
 
 
 def check_loop(out: Path, quick: bool) -> Item:
@@ -628,11 +625,7 @@ def check_loop(out: Path, quick: bool) -> Item:
     ax.set_title(f"tuttle-joint2, locked output: hardening x{lm.hardening:.2f}, "
                  f"area {lm.area:.3g} J", fontsize=10)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "windup_loop.png", dpi=110)
-    plt.close(fig)
-    item.figures.append("windup_loop.png")
-    return item
+    return _finish(item, fig, out / "windup_loop.png", item.passed)
 
 
 def check_identification(out: Path, quick: bool) -> Item:
@@ -679,11 +672,7 @@ def check_identification(out: Path, quick: bool) -> Item:
     axes[1].set_xlabel("torsion motor_angle/ratio (output °)")
     axes[1].set_ylabel("torque (N m)")
     axes[1].legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "identification.png", dpi=110)
-    plt.close(fig)
-    item.figures.append("identification.png")
-    return item
+    return _finish(item, fig, out / "identification.png", item.passed)
 
 
 CHECKS = (check_ke, check_steps, check_resonance, check_loop, check_identification)
