@@ -15,6 +15,7 @@ from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
 from hdgym.discrepancy.workflow import diagnose, diagnose_files
 from hdgym.effects import EFFECTS
 from hdgym.record import Record, RecordError
+from hdgym.sim import Simulator
 
 REAL = Path("/work/shared/real-data/harivin-zxf17")
 SCALES = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=2.0, current_measured=2.0,
@@ -125,9 +126,11 @@ def _run(case: cases.Case, duration: float = FAST_DURATION) -> cases.CaseResult:
 
 
 KNOWN_WEAK = {
-    "stiction": "stiction vs Stribeck friction on breakaway ramps: named inconsistently and the "
-                "validation gap closes by only ~50-70 % (stick-slip fits stall); see "
-                "results/discrepancy.md",
+    "stiction": "stiction on breakaway ramps: every ramp now breaks away from rest and the "
+                "truth reproduces its record, but the stick-slip cost (motor-side micro-slips "
+                "exciting a lightly damped 22 Hz mode) is too rough for the trial fits to reach "
+                "the truth's basin, so the stiction trial gains < 40 % and nothing is named; "
+                "see results/discrepancy.md",
 }
 
 
@@ -140,6 +143,31 @@ def test_hidden_effect_is_named_first_and_closes_the_gap(name):
     d = r.diagnosis
     assert r.found and r.found[0] == name, (r.found, d.conclusion)
     assert d.nmse_after <= 0.2 * d.nmse_before, (d.nmse_before, d.nmse_after)
+
+
+def test_breakaway_ramps_break_away_from_rest():
+    p = cases.truth_for(cases.Case("stiction", ("stiction",), "breakaway_ramps"))
+    u, tl = experiments.command("breakaway_ramps", p, 3.0, seed=1)
+    assert tl is None
+    rec = Simulator(p).run(u, seed=1)
+    w = np.gradient(np.asarray(rec.motor_angle), rec.dt)
+    starts = np.flatnonzero((u[1:] != 0) & (u[:-1] == 0)) + 1
+    assert len(starts) >= 5
+    signs = [np.sign(u[k + 5]) for k in starts]
+    assert all(a != b for a, b in zip(signs[:-1], signs[1:], strict=True))  # alternating directions
+    for k in starts[1:]:
+        assert np.all(w[k - 20:k] == 0.0)  # the joint has stopped before each ramp
+
+
+def test_shooting_restarts_at_rest_keep_the_truth_exact():
+    from hdgym.discrepancy.fitting import Problem
+
+    case = cases.Case("stiction", ("stiction",), "breakaway_ramps")
+    truth = cases.truth_for(case)
+    train, _ = cases.records(case, truth, 3.0)
+    prob = Problem(train, truth)
+    assert prob.rest_points.size >= 5
+    assert prob.nmse(truth)["mean"] < 0.01
 
 
 def test_nothing_hidden_reports_nothing():

@@ -29,9 +29,11 @@ Protocols:
     so the speed rises and falls back through zero every half cycle: the
     Stribeck drop shows while decelerating, where stiction does not act.
 ``breakaway_ramps``
-    free output, slow current ramps to just past breakaway, a hold, and
-    back to zero, in both directions under several external loads:
-    breakaway (static) against running friction.
+    free output, slow current ramps from rest to just past breakaway, a
+    quick drop to zero and a pause in which the joint stops and sticks
+    again, alternating directions: every ramp breaks away from rest, so
+    the breakaway (static) friction shows against the running friction of
+    the short run that follows.
 ``loaded_current_steps``
     free output, current steps while an external load torque steps too:
     load-dependent (tooth) friction.
@@ -57,11 +59,14 @@ PROTOCOLS: dict[str, dict] = {
                       "use": "friction against speed, Stribeck, amplifier saturation"},
     "current_sine": {"locked": False, "duration": 4.0,
                      "use": "speed through zero and back: Stribeck against stiction"},
-    "breakaway_ramps": {"locked": False, "duration": 6.0,
+    "breakaway_ramps": {"locked": False, "duration": 4.0,
                         "use": "breakaway against running friction (stiction)"},
     "loaded_current_steps": {"locked": False, "duration": 6.0,
                              "use": "friction against transmitted torque (tooth friction)"},
 }
+
+RAMP = (0.3, 0.02, 0.15)
+"""Breakaway ramps: rise, drop and pause, s."""
 
 
 def _running_current(p: JointParams, w_m: float) -> float:
@@ -128,24 +133,24 @@ def command(name: str, p: JointParams, duration: float, seed: int = 0
         amp = min(2.0 * ib, 0.9 * imax) * (1 + 0.1 * rng.uniform(-1, 1))
         return amp * np.sin(2 * np.pi * 1.0 * t + rng.uniform(0, 2 * np.pi)), None
     if name == "breakaway_ramps":
-        nr = 6
-        per = n // nr
-        # slow rise to just past breakaway, a hold (running friction and viscous show),
-        # then back to zero
-        n_up, n_hold = int(0.55 * per), int(0.3 * per)
-        tri = np.concatenate([np.linspace(0.0, 1.0, n_up), np.ones(n_hold),
-                              np.zeros(per - n_up - n_hold)])
+        # per ramp: a slow rise from rest to just past breakaway, a quick drop to zero (a rig
+        # stops the ramp once the joint moves) and a pause long enough for the joint to stop
+        # and stick again; alternating directions, so every ramp breaks away from rest
+        n_up, n_down, n_rest = int(RAMP[0] / dt), int(RAMP[1] / dt), int(RAMP[2] / dt)
+        shape = np.concatenate([np.linspace(0.0, 1.0, n_up), np.linspace(1.0, 0.0, n_down),
+                                np.zeros(n_rest)])
         static = {"stiction", "stribeck_friction"} & set(p.effects)
-        # just past breakaway (a rig stops the ramp once it moves); without a static
-        # friction in the model, assume breakaway up to twice the running friction
-        peak = (1.3 if static else 2.6) * ib * (1 + 0.05 * rng.uniform(-1, 1))
-        t_break = ib * p.motor.torque_constant * p.ratio
-        loads = [0.0, 0.0, 0.3 * t_break, 0.3 * t_break, -0.3 * t_break, -0.3 * t_break]
-        u = np.concatenate([tri * peak * (1 if k % 2 == 0 else -1) for k in range(nr)])
-        tl = np.repeat(loads, per)
-        u = np.pad(u, (0, n - u.size))
-        tl = np.pad(tl, (0, n - tl.size), mode="edge")
-        return np.clip(u, -0.9 * imax, 0.9 * imax), tl
+        # just past breakaway; without a static friction in the model, assume breakaway up
+        # to twice the running friction
+        peak = (1.2 if static else 2.4) * ib
+        sign = 1.0 if rng.uniform() < 0.5 else -1.0
+        parts = []
+        k = 0
+        while sum(x.size for x in parts) < n:
+            parts.append(shape * peak * (1 + 0.05 * rng.uniform(-1, 1)) * sign * (-1) ** k)
+            k += 1
+        u = np.concatenate(parts)[:n]
+        return np.clip(u, -0.9 * imax, 0.9 * imax), None
     # loaded_current_steps
     kt_out = p.motor.torque_constant * p.ratio
     lv = np.linspace(2.0 * ib, 0.6 * imax, 3)

@@ -39,6 +39,11 @@ from . import residuals as R
 from .registry import FitParam, Scales, set_values
 
 _BAD = 10.0  # residual per sample (in channel sigmas) of a run that diverged
+REST_PAUSE = 0.03
+"""Seconds without an encoder count that make a pause (a restart point, see :class:`Problem`)."""
+REST_MARGIN = 0.015
+"""The restart point lies this long after the pause's first count-free sample (a stopping
+joint may creep for a few ms within one count)."""
 
 
 def with_sample_time(p: JointParams, dt: float) -> JointParams:
@@ -79,8 +84,10 @@ class Problem:
             current (multiple shooting), so a small speed error cannot grow
             into a position drift that scrambles position-periodic effects
             (0 or None: one run). Restarts happen only while the measured
-            joint moves (faster than 10 % of its typical speed), so sticking
-            and breakaway stay the model's own.
+            joint moves (faster than 10 % of its typical speed), or early in a
+            pause in which the measured joint stands still (no encoder count
+            for :data:`REST_PAUSE`; restarted at zero speed), so sticking and
+            breakaway stay the model's own.
     """
 
     record: Record
@@ -261,8 +268,37 @@ class Problem:
         self.x_moving = np.abs(self.x_w_m) > 0.1 * typical
         self.x_cur = (R.lowpass(self.raw.motor_current, self.dt, self.cutoff)
                       if self.raw.motor_current is not None else None)
+        self.x_rest_angle = np.asarray(self.raw.motor_angle, dtype=float) + qm / 2
+        self.rest_points = self._rest_points()
 
-    def _restart(self, x: np.ndarray, k: int, p: JointParams) -> np.ndarray:
+    def _rest_points(self) -> np.ndarray:
+        """Samples shortly after the measured joint has come to rest.
+
+        A pause is :data:`REST_PAUSE` seconds or more in which no encoder count
+        changes; the restart point lies :data:`REST_MARGIN` after its start. There
+        the measured state is exact (speeds zero, angles known to a count), so a
+        segment can restart from it without injecting a speed error, while the
+        rest of the pause and the breakaway that ends it stay the model's own (a
+        model that breaks away too early or too late shows it).
+        """
+        m = int(round(REST_PAUSE / self.dt))
+        margin = int(round(REST_MARGIN / self.dt))
+        still = np.diff(self.raw.motor_angle) == 0
+        if self.raw.output_angle is not None:
+            still &= np.diff(np.asarray(self.raw.output_angle, dtype=float)) == 0
+        out = []
+        run = 0
+        for k, s in enumerate(np.append(still, False)):  # still[k]: no count from k to k+1
+            if s:
+                run += 1
+                continue
+            if run >= m:
+                out.append(k - run + margin)
+            run = 0
+        return np.asarray(out, dtype=int)
+
+    def _restart(self, x: np.ndarray, k: int, p: JointParams, at_rest: bool = False
+                 ) -> np.ndarray:
         """Sim state ``x`` at sample ``k`` moved onto the measured motor angle, speed, current.
 
         The output follows with the simulation's own torsion and torsion rate (and
@@ -286,11 +322,18 @@ class Problem:
         k0, d0 = ke(x[L.TH_M])
         tors = x[L.TH_M] / r - x[L.TH_O] - k0
         rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
-        x[L.TH_M] = self.x_th_m[k]
-        x[L.W_M] = self.x_w_m[k]
-        k1, d1 = ke(x[L.TH_M])
-        x[L.TH_O] = x[L.TH_M] / r - k1 - tors
-        x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
+        if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
+            x[L.TH_M] = self.x_rest_angle[k]
+            x[L.W_M] = 0.0
+            k1, _ = ke(x[L.TH_M])
+            x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+            x[L.W_O] = 0.0
+        else:
+            x[L.TH_M] = self.x_th_m[k]
+            x[L.W_M] = self.x_w_m[k]
+            k1, d1 = ke(x[L.TH_M])
+            x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+            x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[k]
         x[L.DTH] = tors
@@ -312,17 +355,23 @@ class Problem:
         else:
             st = np.empty((n, L.N_STATE))
             a = 0
+            rest = self.rest_points
             while a < n:
                 b = min(a + seg, n)
-                while b < n and not self.x_moving[b]:  # never restart a joint at rest
-                    b += 1
+                j = int(np.searchsorted(rest, a, side="right"))
+                at_rest = j < rest.size and rest[j] <= b
+                if at_rest:  # a pause starts before the segment would end: restart at rest
+                    b = int(rest[j])
+                else:
+                    while b < n and not self.x_moving[b]:  # never restart a joint mid-pause
+                        b += 1
                 if n - b < 2:
-                    b = n
+                    b, at_rest = n, False
                 e = min(b + 1, n)
                 _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x0)
                 st[a:b] = part[: b - a]
                 if b < n:
-                    x0 = self._restart(part[b - a].copy(), b, p)
+                    x0 = self._restart(part[b - a].copy(), b, p, at_rest)
                 a = b
         mc, oc = self.counts
         raw = R.Raw(motor_angle=R.quantize(st[:, L.TH_M], mc),
