@@ -24,8 +24,8 @@ e.g. a continuous current rating; never above the amplifier's limit),
 ``full`` (constant full current), ``const@X`` (constant X times full
 current) and ``const@XA`` (constant X A; above the amplifier's limit it
 saturates there). "The amplifier" is the env's: for
-``HarmonicDriveResonance-v0`` its ``current_limit`` (default 3.7 A), not
-the preset's 6 A, unless the config sets ``current_limit``.
+``HarmonicDriveResonance-v0`` the preset's (6 A on tuttle-joint1) unless the
+config sets ``current_limit`` (3.7 A: the trap-only variant).
 ``ripple@a,phi`` and ``damp@a,phi`` are full current shaped against the
 vibration (:class:`~agents.baselines.RippleCurrent`,
 :class:`~agents.baselines.DampingCurrent`; they are meant to run with an

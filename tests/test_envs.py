@@ -315,17 +315,20 @@ def test_unknown_names_raise():
 
 
 def test_resonance_current_limit_overrides_the_amplifier():
-    from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT
+    from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT, TRAP_ONLY_CURRENT_LIMIT
     from hdgym.physics import layout as L
 
-    # the default sits inside Tuttle's 2.8-4.0 A velocity plateau; the preset keeps its 6 A
-    assert 2.8 <= DEFAULT_CURRENT_LIMIT <= 4.0
+    # the default keeps the preset's 6 A amplifier; the trap-only variant's 3.7 A sits inside
+    # Tuttle's 2.8-4.0 A velocity plateau
+    assert DEFAULT_CURRENT_LIMIT is None
+    assert 2.8 <= TRAP_ONLY_CURRENT_LIMIT <= 4.0
     u = make(IDS[1]).unwrapped
-    assert u.params.amplifier.current_limit == DEFAULT_CURRENT_LIMIT
+    assert u.params.amplifier.current_limit == JOINT.amplifier.current_limit == 6.0
     assert u.params.amplifier.voltage_limit == JOINT.amplifier.voltage_limit
-    assert JOINT.amplifier.current_limit == 6.0
     assert make(IDS[1], current_limit=None).unwrapped.params.amplifier.current_limit == 6.0
-    for lim in (2.5, 5.0):
+    vdef = gym.make_vec(IDS[1], num_envs=2, vectorization_mode="vector_entry_point", preset=JOINT)
+    assert np.all(vdef.unwrapped.batch.rows[:, L.I_MAX] == 6.0)
+    for lim in (TRAP_ONLY_CURRENT_LIMIT, 2.5, 5.0):
         env = make(IDS[1], current_limit=lim).unwrapped
         venv = gym.make_vec(IDS[1], num_envs=3, vectorization_mode="vector_entry_point",
                             preset=JOINT, current_limit=lim)

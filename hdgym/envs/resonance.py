@@ -10,8 +10,11 @@ from hdgym.envs.common import HarmonicDriveEnv, resolve_params
 from hdgym.envs.tasks import ResonanceTask
 from hdgym.params import JointParams
 
-#: A, the task's amplifier current limit (see ``current_limit``)
-DEFAULT_CURRENT_LIMIT = 3.7
+#: A, the default ``current_limit``: ``None`` keeps the preset's amplifier (6 A on tuttle-joint1)
+DEFAULT_CURRENT_LIMIT = None
+
+#: A, the "trap-only" variant's amplifier (``current_limit=3.7``): full current stays trapped
+TRAP_ONLY_CURRENT_LIMIT = 3.7
 
 
 def resonance_params(preset: str | JointParams | None,
@@ -44,25 +47,34 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
     joint 1 (the default preset) the 2x-order trap sits near 8,000 deg/s of
     input speed; the target is drawn in 10,000-12,000 deg/s.
 
-    The task's drive has a smaller amplifier than Tuttle's: its current
-    limit (``current_limit``, default 3.7 A, against the preset's 6 A) sits
-    inside the velocity plateau (Tuttle's steps of 2.8-4.0 A all settle in
-    the trap; 4.4 A and up break out), so brute-force current cannot break
-    out: constant full current (and a saturated speed controller) stays
-    below 9,000 deg/s in about 92 % of episodes randomized by +-10 % in
-    stiffness, friction and kinematic-error amplitude (3 s episodes). The
-    back-EMF voltage limit of the preset stays in force. The agent must find
-    another way through (timing the run-up, managing the oscillation), if
-    one exists: in our tests every shaped current tried (2x-order ripple
-    in phase with the WG angle, active damping of the twist from the torque
-    sensor or even from the true states, pulses, ramps) lost more speed
-    through the lower mean current than it saved in friction, and PPO
-    converged to full current (``results/rl/evaluation.md``).
+    The task (default, the preset's amplifier: 6 A on tuttle-joint1) is to
+    get through the trap to the target while keeping the flexspline torque
+    oscillation low (the reward penalizes it). Brute force crosses here:
+    constant full current and a saturated PI speed loop reach the target,
+    but with about twice the peak flexspline torque of a learned policy
+    (PPO, ``agents/``: ~160 against ~330 N m mean peak over randomized
+    episodes, ``results/rl/evaluation.md``). The back-EMF voltage limit of
+    the preset is in force.
+
+    ``current_limit=3.7`` is the *trap-only* variant: a smaller amplifier
+    whose limit sits inside the velocity plateau (Tuttle's steps of
+    2.8-4.0 A all settle in the trap; 4.4 A and up break out), so constant
+    full current and a saturated speed controller stay below 9,000 deg/s in
+    about 93 % of randomized 3 s episodes. As measured, nothing crosses
+    there either: every shaped current tried (2x-order ripple locked to the
+    WG angle, active damping of the twist from the torque sensor or the
+    true states, pulses, ramps) lost more speed through the lower mean
+    current than it saved in friction, and PPO converged to full current.
+    The reason is physical: the motor's inertia reflected through the ratio
+    (~5.7 kg m^2 against 1 kg m^2 at the output) leaves the current a share
+    of ~0.15 of its torque on the torsional mode, ~5 N m at 3.7 A, against
+    ~16-23 N m of kinematic-error forcing. Use it to show a trap, not as a
+    solvable benchmark.
 
     ## Action space
 
-    ``Box(-1, 1, (1,), float32)``: current command / ``I_max`` (the task's
-    ``current_limit``). Values
+    ``Box(-1, 1, (1,), float32)``: current command / ``I_max`` (the
+    amplifier's limit: the preset's, or ``current_limit``). Values
     outside [-1, 1] saturate like the amplifier's input clip; NaN or
     infinite actions raise ``ValueError``. Current and back-EMF limits and
     the current loop act inside the physics.
@@ -106,8 +118,9 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
 
     * Truncation at 2000 steps (2 s at 1 ms).
     * Termination: ``|flexspline torque| > torque_limit`` (default
-      8 ``K_t I_max ratio``, 257 N m with the default 3.7 A; a full-current
-      run into the trap on tuttle-joint1 peaks at about 55 % of it),
+      8 ``K_t I_max ratio``: 417 N m with the preset's 6 A, where a
+      full-current run-up on tuttle-joint1 peaks at 330-380 N m; 257 N m
+      with ``current_limit=3.7``),
       ``|motor speed| > speed_limit`` (default
       1.5 ``V/K_b``) or a diverging simulation.
 
@@ -121,11 +134,11 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
     * ``target_speed``: motor speed, rad/s, a number or ``(low, high)``
       (default ``(radians(10000), radians(12000))``);
     * ``oscillation_weight`` (1.0), ``torque_time_constant`` (0.05 s);
-    * ``current_limit``: A, the amplifier's current limit for this task,
-      replacing the preset's ``amplifier.current_limit`` (default
-      :data:`DEFAULT_CURRENT_LIMIT` = 3.7 A; ``None`` keeps the preset's
-      amplifier); must be > 0. It also sets ``I_max`` in the action and
-      observation scales and the default ``torque_limit``.
+    * ``current_limit``: A, replaces the preset's ``amplifier.current_limit``
+      (default ``None``: the preset's amplifier, 6 A on tuttle-joint1;
+      :data:`TRAP_ONLY_CURRENT_LIMIT` = 3.7 A is the trap-only variant);
+      must be > 0. It also sets ``I_max`` in the action and observation
+      scales and the default ``torque_limit``.
     """
 
     def __init__(self, preset: str | JointParams | None = None, without: Iterable[str] = (),
