@@ -256,15 +256,34 @@ def main(argv: list[str] | None = None) -> int:
         "can take up; the hold-out check removes most, not all of them).",
         "- Protocols come from `hdgym.discrepancy.experiments` and are designed from the truth "
         "joint's parameters; records are short (3 s at 1 kHz) to keep the sweep cheap.",
+        "- Free-output records are simulated in segments (multiple shooting): restarts from "
+        "the measured motor angle and speed every 0.5 s while the joint moves, and from the "
+        "exact measured rest state early in each pause (no encoder count for 30 ms), so a "
+        "model that breaks away too early or too late still shows it "
+        "(`hdgym.discrepancy.fitting.Problem`).",
         "- The per-effect tests in `tests/test_discrepancy.py` run the same cases on 2 s "
         "records.",
         "",
         "## Known limits",
         "",
         "- Stiction and Stribeck friction are nested (stiction is Stribeck friction with a "
-        "vanishing Stribeck velocity) and both act through stick-slip, where the "
-        "least-squares cost is rough: the workflow separates them only by a parsimony rule, "
-        "and the validation gap on the breakaway-ramp records closes by well under 80 %.",
+        "vanishing Stribeck velocity). Between the two, the simpler one is preferred when it "
+        "achieves 75 % of the other's improvement, judged on the validation record when "
+        "there is one (`PARSIMONY`).",
+        "- Stiction (xfail in the tests): on `breakaway_ramps` every ramp now breaks away from "
+        "rest (slow rise to just past breakaway, quick drop, pause until the joint sticks "
+        "again, alternating directions), and the simulated segments restart from the "
+        "measured rest state early in each pause, so the true model reproduces its record "
+        "(NMSE < 0.01 %). But the stick-slip cost is rough: the motor side slips in small "
+        "steps while the spring winds up, each slip rings the lightly damped ~22 Hz "
+        "motor-spring mode, and the output's breakaway instant moves with that ringing, so a "
+        "few per cent of error in stiffness, inertia or Coulomb level costs as much NMSE as "
+        "leaving stiction out. The base fit absorbs the breakaway into inertia, stiffness "
+        "and Coulomb level, and the trial refits (coarse grid start, then least squares or "
+        "coordinate search) stay in that basin: the stiction trial cuts the cost by "
+        "well under the 40 % threshold and nothing is named. Passing it needs an "
+        "event-based comparison (breakaway currents and stopping times per ramp) or a "
+        "global search over the core parameters, not a retuned threshold.",
         "- NMSE is normalized by each channel's variance; a nearly constant channel (the "
         "torque at constant speed) gives very large NMSE values for small offsets, as in the "
         "position-dependent-friction row.",
