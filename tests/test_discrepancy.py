@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hdgym.discrepancy import cases, experiments
+from hdgym.discrepancy import cases, experiments, realdata
 from hdgym.discrepancy.registry import REGISTRY, Scales, get_value, model_params, set_values
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
 from hdgym.discrepancy.workflow import diagnose, diagnose_files
@@ -17,7 +17,7 @@ from hdgym.effects import EFFECTS
 from hdgym.record import Record, RecordError
 from hdgym.sim import Simulator
 
-REAL = Path("/work/shared/real-data/harivin-zxf17")
+REAL = realdata.DATA
 SCALES = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=2.0, current_measured=2.0,
                 voltage=20.0, transmission_error=1e-4,
                 ke=((2.0, 2e-4, 1e-4),), ripple=((1.0, 0.1, 0.0),))

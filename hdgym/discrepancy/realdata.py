@@ -1,6 +1,7 @@
 """Real measurements of a ZXF17-50 strain-wave actuator (harivin/harmonic-drive-actuator, MIT).
 
-The files live in ``/work/shared/real-data/harivin-zxf17/`` (with their
+The files live in ``shared/real-data/harivin-zxf17/`` beside the checkout, or in
+``$HDGYM_REAL_DATA`` (with their
 ``LICENSE``); they are read from there at run time, never copied. See that
 folder's README for the columns.
 
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -43,10 +45,20 @@ from hdgym.params import (
 )
 from hdgym.record import Record, RecordError
 
-DATA = Path("/work/shared/real-data/harivin-zxf17")
+
+def _data_dir() -> Path:
+    """The real-data folder: $HDGYM_REAL_DATA, else ``shared/`` beside the checkout."""
+    env = os.environ.get("HDGYM_REAL_DATA")
+    if env:
+        return Path(env)
+    repo = Path(__file__).resolve().parents[2]
+    return repo.parent / "shared" / "real-data" / "harivin-zxf17"
+
+
+DATA = _data_dir()
 RATIO = 50.0
 SOURCE = ("harivin/harmonic-drive-actuator, folder data/ (MIT licence; see LICENSE in "
-          "/work/shared/real-data/harivin-zxf17)")
+          "shared/real-data/harivin-zxf17)")
 
 
 def _read_csv(path: Path) -> tuple[list[str], list[list[str]]]:
@@ -185,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
     diag = diagnose(train, params, val, mode="inverse", fit_window=None)
     notes = _notes(diag, data, kt_out)
     notes.append("Base model: zxf17-50.toml in this folder (written by the same command); the "
-                 "data are read from /work/shared/real-data/harivin-zxf17 at run time (MIT "
+                 "data are read from shared/real-data/harivin-zxf17 at run time (MIT "
                  "licence, LICENSE there), not copied.")
     write_report(diag, out, notes=notes,
                  title="Discrepancy report: ZXF17-50 friction sweep (real data)",
