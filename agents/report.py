@@ -372,6 +372,8 @@ Regenerate (training: the wall time below; report: a few minutes):
     python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
     cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
     python -m agents.report --run runs/resonance_ppo-s0
+    # second seed row: python -m agents.train --config resonance_ppo --seed 1 \\
+    #   --out runs/resonance_ppo-s1, then add --also runs/resonance_ppo-s1 to the report
 
 Evaluate the committed policy only:
 `python -m agents.evaluate --policy {policy} --episodes {n} --seed {seed}
