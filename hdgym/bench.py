@@ -55,7 +55,7 @@ def bench_physics(p: JointParams, quick: bool = False) -> list[dict]:
         u = np.linspace(1.0, 4.0, n)
         z = np.zeros(n)
         bad = np.zeros(n, dtype=np.bool_)
-        step = kernel.step_parallel if n >= 64 else kernel.step_serial
+        step = kernel.step_for(n)
         xs = L.initial_state(ps, flags)
 
         def stepped(xs=xs, ps=ps, u=u, z=z, flags=flags, bad=bad, step=step, steps=steps):

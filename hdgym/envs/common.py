@@ -37,8 +37,6 @@ from hdgym.physics import layout as L
 DEFAULT_PRESET = "tuttle-joint1"
 #: sensor-noise samples drawn per env at a time
 NOISE_BLOCK = 256
-#: batches at least this large use the multi-threaded kernel
-PARALLEL_THRESHOLD = 64
 
 #: true-state names reported in ``info`` (state columns 0..5 of the layout)
 INFO_STATES = ("motor_angle", "motor_velocity", "output_angle", "output_velocity",
@@ -220,7 +218,7 @@ class JointBatch:
         # noise is drawn per env by this class (see module docstring), not by the bank
         quiet = replace(sens, torque_noise=0.0, current_noise=0.0)
         self.bank = SensorBank.from_params(n, quiet, ctrl_dt, np.random.default_rng(0))
-        self.kernel_step = kernel.step_parallel if n >= PARALLEL_THRESHOLD else kernel.step_serial
+        self.kernel_step = kernel.step_for(n)
         self.post = task.post
 
     # ------------------------------------------------------------ episodes

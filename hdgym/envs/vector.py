@@ -3,9 +3,10 @@
 ``gym.make_vec("HarmonicDriveJoint-v0", num_envs=n,
 vectorization_mode="vector_entry_point")`` returns a
 :class:`HarmonicDriveVectorEnv`. Every env carries its own parameter row
-(randomized per episode when ``randomize`` is given). Batches of 64 envs
-and more step on all cores (``kernel.step_parallel``), smaller ones on one
-(``kernel.step_serial``); the results are the same.
+(randomized per episode when ``randomize`` is given). Batches of 1,024 envs
+and more (``kernel.PARALLEL_THRESHOLD``) step on all cores
+(``kernel.step_parallel``), smaller ones on one (``kernel.step_serial``); the
+results are the same.
 
 Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
 be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
