@@ -146,4 +146,28 @@ def write_table(out: Path, quick: bool = False) -> None:
                              f"{r['output_angle']:.2e} | {r['torque']:.2e} | "
                              f"{r['torque_rms']:.2e} |")
         lines.append("")
+    lines += _step_table_section(quick)
     atomic_write_text(out, "\n".join(lines))
+
+
+def _step_table_section(quick: bool) -> list[str]:
+    """Tuttle's current-step table (fidelity item b) at several substep counts.
+
+    The random-excitation errors above are a strict test (stick-slip and
+    resonance make nearby trajectories part); this shows whether the
+    quantity the fidelity page asserts moves with the step.
+    """
+    from hdgym.params import preset
+    from hdgym.reproduce import step_table
+
+    currents = np.round(np.arange(1.6, 6.01, 0.8 if quick else 0.4), 2)
+    p = preset("tuttle-joint1")
+    lines = ["## tuttle-joint1: Tuttle's current-step table against the substep", "",
+             "Mean input speed over the last 2 s of 4 s current steps from rest (°/s), as in "
+             "`hdgym reproduce tuttle` item (b).", "",
+             "| n_substeps | " + " | ".join(f"{c:g} A" for c in currents) + " |",
+             "|---|" + "---|" * len(currents)]
+    for n_sub in (5, 10, 20, 40):
+        speeds, _ = step_table(p.set("integration.n_substeps", n_sub), currents)
+        lines.append(f"| {n_sub} | " + " | ".join(f"{v:.0f}" for v in np.degrees(speeds)) + " |")
+    return lines + [""]
