@@ -514,6 +514,16 @@ SCENARIOS: dict[str, Callable[..., dict[str, float]]] = {
 # ------------------------------------------------------------------ figures
 
 
+def _save(fig: Any, figdir: Path, filename: str) -> str:
+    """Write a figure into ``figdir``; return its path relative to the page."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(figdir / filename, dpi=110)
+    plt.close(fig)
+    return f"controllers/{filename}"
+
+
 def _figures(name: str, res: dict[str, Any], figdir: Path) -> dict[str, str]:
     import matplotlib
 
@@ -544,10 +554,7 @@ def _figures(name: str, res: dict[str, Any], figdir: Path) -> dict[str, str]:
     ax[2].set(xlabel="time (s)", ylabel="output error (arcsec)",
               title="speed sweep with the learnt series kept")
     ax[2].legend(fontsize=7)
-    fig.tight_layout()
-    files["tracking"] = f"controllers/tracking_{name}.png"
-    fig.savefig(figdir / f"tracking_{name}.png", dpi=110)
-    plt.close(fig)
+    files["tracking"] = _save(fig, figdir, f"tracking_{name}.png")
 
     ls = res["load_step"]
     fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
@@ -557,10 +564,7 @@ def _figures(name: str, res: dict[str, Any], figdir: Path) -> dict[str, str]:
     ax[0].set(ylabel="output deviation (arcsec)", title=f"{name}: load step {ls['step']:.3g} N m")
     ax[1].set(xlabel="time (s)", ylabel="current command (A)")
     ax[0].legend(fontsize=7)
-    fig.tight_layout()
-    files["load_step"] = f"controllers/load_step_{name}.png"
-    fig.savefig(figdir / f"load_step_{name}.png", dpi=110)
-    plt.close(fig)
+    files["load_step"] = _save(fig, figdir, f"load_step_{name}.png")
 
     pp = res["point_to_point"]
     fig, ax = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
@@ -574,10 +578,7 @@ def _figures(name: str, res: dict[str, Any], figdir: Path) -> dict[str, str]:
     ax[1].set(ylabel="error (deg)")
     ax[2].set(xlabel="time (s)", ylabel="current command (A)")
     ax[0].legend(fontsize=7)
-    fig.tight_layout()
-    files["point_to_point"] = f"controllers/point_to_point_{name}.png"
-    fig.savefig(figdir / f"point_to_point_{name}.png", dpi=110)
-    plt.close(fig)
+    files["point_to_point"] = _save(fig, figdir, f"point_to_point_{name}.png")
 
     bd = res["bode"]
     fig, ax = plt.subplots(2, 2, figsize=(10, 6))
@@ -593,10 +594,7 @@ def _figures(name: str, res: dict[str, Any], figdir: Path) -> dict[str, str]:
         ax[0, j].set(title=f"{name}: current → {ch}", ylabel="dB")
         ax[1, j].set(xlabel="Hz", ylabel="deg")
         ax[0, j].legend(fontsize=7)
-    fig.tight_layout()
-    files["bode"] = f"controllers/bode_{name}.png"
-    fig.savefig(figdir / f"bode_{name}.png", dpi=110)
-    plt.close(fig)
+    files["bode"] = _save(fig, figdir, f"bode_{name}.png")
     return files
 
 
