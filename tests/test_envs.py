@@ -12,45 +12,10 @@ import pytest
 
 import hdgym  # noqa: F401  (registers the ids)
 from hdgym.envs.vector import HarmonicDriveVectorEnv
-from hdgym.params import (
-    Amplifier,
-    Compliance,
-    Friction,
-    FrictionSide,
-    Harmonic,
-    Hysteresis,
-    JointParams,
-    KinematicError,
-    Load,
-    Motor,
-    Transmission,
-    preset,
-    preset_names,
-)
+from hdgym.params import preset
 
 IDS = ("HarmonicDriveJoint-v0", "HarmonicDriveResonance-v0")
-HAVE_PRESET = "tuttle-joint1" in preset_names()
-
-
-def _fallback_joint() -> JointParams:
-    """Tuttle-joint1-like drive built from the dataclasses (used until the preset lands)."""
-    return JointParams(
-        motor=Motor(inertia=2.2e-4, torque_constant=0.09, back_emf_constant=0.09, resistance=1.0),
-        transmission=Transmission(n=160, grounded="flexspline"),
-        compliance=Compliance(stiffness=6e4, cubic=3e9, damping=5.0),
-        load=Load(inertia=1.0),
-        amplifier=Amplifier(current_limit=6.0, voltage_limit=48.0),
-        hysteresis=Hysteresis(element_stiffness=(1e4, 2e4), element_strength=(0.5, 1.0)),
-        friction=Friction(
-            input=FrictionSide(coulomb=0.05, breakaway=0.08, stribeck_velocity=2.0,
-                               viscous=1e-3),
-            output=FrictionSide(coulomb=2.0, breakaway=3.0, viscous=1.0), tooth_mu=0.15),
-        kinematic_error=KinematicError(harmonics=(Harmonic(order=2, amplitude=3.5e-4),
-                                                  Harmonic(order=4, amplitude=1.2e-4))),
-    )
-
-
-JOINT = preset("tuttle-joint1") if HAVE_PRESET else _fallback_joint()
+JOINT = preset("tuttle-joint1")
 NOISY = {"torque_noise": 0.5, "current_noise": 0.02, "delay": 1}
 RAND = {"compliance.stiffness": 0.2, "friction.output.coulomb": 0.3,
         "kinematic_error.amplitude": 0.2, "load.inertia": 0.2}
@@ -86,7 +51,6 @@ def test_registered_after_import():
     assert env.unwrapped.params is JOINT
 
 
-@pytest.mark.skipif(not HAVE_PRESET, reason="preset tuttle-joint1 not bundled yet")
 def test_default_preset_is_tuttle_joint1():
     for env_id in IDS:
         env = gym.make(env_id)
