@@ -165,6 +165,7 @@ class Simulator:
         u = np.zeros(t.size)
         ref = np.full(t.size, np.nan)
         dt = self.ctrl_dt / self.n_substeps
+        trig = np.empty(kernel.SCRATCH)  # the kernel's per-env scratch, reused
         for k in range(t.size):
             states[k] = x
             meas[k] = reading[:, 0]
@@ -177,7 +178,8 @@ class Simulator:
                 raise ValueError(f"controller returned {cmd!r} at t = {t[k]:.6g} s")
             u[k] = cmd
             if k + 1 < t.size:
-                kernel.substeps(x, self.row, cmd, tl[k], dt, self.n_substeps, self.flags)
+                kernel.substeps_with(x, self.row, cmd, tl[k], dt, self.n_substeps, self.flags,
+                                     trig)
                 if kernel._bad(x):
                     raise SimulationError(diverged_message(x, k, self.ctrl_dt))
                 reading = bank.measure(xs)

@@ -28,6 +28,7 @@ import numba as nb
 import numpy as np
 
 from hdgym.effects import BIT, LOCKED_OUTPUT_BIT
+from hdgym.params import MAX_HARMONICS, MAX_RIPPLES
 from hdgym.physics.layout import (
     BW,
     CDAMP,
@@ -108,10 +109,11 @@ LOADDEP = BIT["load_dependent_friction"]
 AMP = BIT["amplifier_saturation"]
 LOCKED = LOCKED_OUTPUT_BIT
 
-_jit = nb.njit(cache=True, fastmath=False, nogil=True)
+_jit = nb.njit(cache=True, fastmath={"contract"}, nogil=True)
+_inl = nb.njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 
 
-@_jit
+@_inl
 def spring_torque(x: float, p: np.ndarray, flags: int) -> float:
     """Spring torque of the flexspline at torsion ``x`` (output rad), N m."""
     k1 = p[K1]
@@ -138,22 +140,27 @@ def spring_torque(x: float, p: np.ndarray, flags: int) -> float:
     return k1 * x
 
 
+@_inl
+def _coulomb_level(p: np.ndarray, base: int, w: float, flags: int) -> float:
+    """Coulomb, Stribeck and stiction level (>= 0) at speed ``w``; ``w == 0`` means stuck."""
+    if not (flags & COUL):
+        return 0.0
+    fc = p[base + F_FC]
+    if w == 0.0:
+        return p[base + F_FS] if (flags & (STICK | STRIB)) else fc
+    if flags & STRIB:
+        r = w / p[base + F_WS]
+        r2 = r * r
+        # exp(-40) < 5e-18: skip the call far above the Stribeck speed
+        return fc + (p[base + F_FS] - fc) * math.exp(-r2) if r2 < 40.0 else fc
+    return fc
+
+
 @_jit
 def _friction_level(p: np.ndarray, base: int, w: float, th_in: float, th_out: float,
                     extra: float, flags: int) -> float:
     """Coulomb-type friction level (>= 0) at speed ``w``; ``w == 0`` means stuck."""
-    level = 0.0
-    if flags & COUL:
-        fc = p[base + F_FC]
-        if w == 0.0:
-            level = p[base + F_FS] if (flags & (STICK | STRIB)) else fc
-        elif flags & STRIB:
-            r = w / p[base + F_WS]
-            r2 = r * r
-            # exp(-40) < 5e-18: skip the call far above the Stribeck speed
-            level = fc + (p[base + F_FS] - fc) * math.exp(-r2) if r2 < 40.0 else fc
-        else:
-            level = fc
+    level = _coulomb_level(p, base, w, flags)
     if flags & POSDEP:
         for k in range(int(p[base + F_NRIP])):
             ang = th_in if p[base + F_RFRAME + k] == 0.0 else th_out
@@ -166,33 +173,117 @@ def _friction_level(p: np.ndarray, base: int, w: float, th_in: float, th_out: fl
 @_jit
 def _viscous_coeff(p: np.ndarray, base: int, w: float, flags: int) -> float:
     """Secant viscous coefficient f(w)/w >= 0 of ``b1 w + b2 w^3`` clamped at its peak."""
-    if not (flags & VISC):
-        return 0.0
-    b1 = p[base + F_B1]
-    b2 = p[base + F_B2]
-    if b2 == 0.0:
-        return b1
-    if b2 > 0.0:
-        return b1 + b2 * w * w
-    w2 = w * w
-    wpk2 = b1 / (-3.0 * b2)
-    if w2 <= wpk2:
-        return b1 + b2 * w2
-    # beyond the peak the torque stays at f(w_pk)
-    wpk = math.sqrt(wpk2)
-    return (b1 * wpk + b2 * wpk2 * wpk) / abs(w)
+    mode, b1, b2, wpk2, fpk = _visc_consts(p, base, flags)
+    return _visc(mode, b1, b2, wpk2, fpk, w)
+
+
+# ---------------------------------------------------------------- the fast path
+# The substep below is what every env step runs ten times, so it avoids what
+# costs there: divisions (per-call reciprocals instead), and sin/cos of the
+# kinematic-error and friction-ripple phases (computed exactly once per call,
+# then rotated by each substep's angle increment with a short Taylor series).
+
+#: phases tracked per env: kinematic-error harmonics, input and output ripples, gravity arm
+N_PHASES = MAX_HARMONICS + 2 * MAX_RIPPLES + 1
+_RIP0 = (MAX_HARMONICS, MAX_HARMONICS + MAX_RIPPLES)  # first ripple phase, per friction side
+_GRAV_PHASE = N_PHASES - 1
+#: scratch floats one env needs (sin, then cos, of every phase)
+SCRATCH = 2 * N_PHASES
+
+
+@_inl
+def _rotate(trig: np.ndarray, j: int, d: float) -> None:
+    """Advance phase ``j`` of ``trig`` (sines, then cosines) by ``d`` rad."""
+    if abs(d) < 0.3:
+        # Taylor to d^13 / d^14: truncation below 3e-17 for |d| < 0.3
+        z = d * d
+        sd = d * (1.0 + z * (-1.0 / 6.0 + z * (1.0 / 120.0 + z * (
+            -1.0 / 5040.0 + z * (1.0 / 362880.0 + z * (-1.0 / 39916800.0
+                                                         + z / 6227020800.0))))))
+        cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (
+            1.0 / 40320.0 + z * (-1.0 / 3628800.0 + z / 479001600.0)))))
+    else:
+        sd = math.sin(d)
+        cd = math.cos(d)
+    s = trig[j]
+    c = trig[N_PHASES + j]
+    trig[j] = s * cd + c * sd
+    trig[N_PHASES + j] = c * cd - s * sd
 
 
 @_jit
-def _advance(w: float, tau: float, inertia: float, visc: float, level: float,
-             dt: float) -> tuple[float, float]:
+def _set_phase(trig: np.ndarray, j: int, a: float) -> None:
+    trig[j] = math.sin(a)
+    trig[N_PHASES + j] = math.cos(a)
+
+
+@_jit
+def _init_ripples(trig: np.ndarray, p: np.ndarray, side: int, base: int, th_m: float,
+                  th_o: float) -> int:
+    """Exact phases of one side's friction ripples; returns how many there are."""
+    nrip = int(p[base + F_NRIP])
+    for k in range(nrip):
+        ang = th_m if p[base + F_RFRAME + k] == 0.0 else th_o
+        _set_phase(trig, _RIP0[side] + k, p[base + F_RORD + k] * ang + p[base + F_RPH + k])
+    return nrip
+
+
+@_inl
+def _rotate_ripples(trig: np.ndarray, p: np.ndarray, side: int, base: int, nrip: int,
+                    d_m: float, d_o: float) -> None:
+    for k in range(nrip):
+        d = d_m if p[base + F_RFRAME + k] == 0.0 else d_o
+        _rotate(trig, _RIP0[side] + k, p[base + F_RORD + k] * d)
+
+
+@_inl
+def _level(p: np.ndarray, base: int, w: float, extra: float, flags: int, trig: np.ndarray,
+           rip0: int, nrip: int) -> float:
+    """:func:`_friction_level` with the ripple sines taken from ``trig``."""
+    level = _coulomb_level(p, base, w, flags)
+    for k in range(nrip):
+        level += p[base + F_RAMP + k] * trig[rip0 + k]
+    level += extra
+    return level if level > 0.0 else 0.0
+
+
+@_jit
+def _visc_consts(p: np.ndarray, base: int, flags: int) -> tuple[int, float, float, float, float]:
+    """(mode, b1, b2, w_pk^2, f(w_pk)) of one side; mode 0 off, 1 linear, 2 cubic, 3 capped."""
+    if not (flags & VISC):
+        return 0, 0.0, 0.0, 0.0, 0.0
+    b1 = p[base + F_B1]
+    b2 = p[base + F_B2]
+    if b2 == 0.0:
+        return 1, b1, 0.0, 0.0, 0.0
+    if b2 > 0.0:
+        return 2, b1, b2, 0.0, 0.0
+    wpk2 = b1 / (-3.0 * b2)
+    wpk = math.sqrt(wpk2)
+    return 3, b1, b2, wpk2, b1 * wpk + b2 * wpk2 * wpk
+
+
+@_inl
+def _visc(mode: int, b1: float, b2: float, wpk2: float, fpk: float, w: float) -> float:
+    """:func:`_viscous_coeff` from the constants of :func:`_visc_consts`."""
+    if mode <= 1:
+        return b1
+    w2 = w * w
+    if mode == 2 or w2 <= wpk2:
+        return b1 + b2 * w2
+    return fpk / abs(w)
+
+
+@_inl
+def _advance(w: float, tau: float, h: float, visc: float, level: float) -> tuple[float, float]:
     """New speed under torque ``tau``, implicit viscous and bounded Coulomb impulse.
 
-    Returns (new speed, dissipated power).
+    ``h`` is the substep over the inertia (s/(kg m^2)). Returns (new speed,
+    dissipated power).
     """
-    denom = 1.0 + dt * visc / inertia
-    v_free = (w + dt * tau / inertia) / denom
-    dv = dt * level / inertia / denom
+    inv = 1.0 / (1.0 + h * visc)
+    v_free = (w + h * tau) * inv
+    dv = h * level * inv
     if abs(v_free) <= dv:
         return 0.0, 0.0
     v = v_free - math.copysign(dv, v_free)
@@ -200,41 +291,64 @@ def _advance(w: float, tau: float, inertia: float, visc: float, level: float,
 
 
 @_jit
-def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
-             n_sub: int, flags: int) -> None:
-    """Advance one env's state ``x`` in place by ``n_sub`` substeps of ``dt`` s.
-
-    ``i_cmd`` is the current command (A); ``t_ext`` an external load torque
-    (N m, resisting positive output motion) added to the preset's load.
-    """
+def substeps_with(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
+                  n_sub: int, flags: int, trig: np.ndarray) -> None:
+    """:func:`substeps` with caller-owned scratch ``trig`` (:data:`SCRATCH` floats)."""
     r = p[RATIO]
     inv_r = 1.0 / r
-    jm = p[J_M]
-    jo = p[J_O]
+    h_m = dt / p[J_M]
+    h_o = dt / p[J_O]
     alpha = 1.0 - math.exp(-2.0 * math.pi * p[BW] * dt)
     locked = (flags & LOCKED) != 0
     nke = int(p[NKE]) if (flags & KE) else 0
     nslip = int(p[NSLIP]) if (flags & HYST) else 0
     tanh_model = p[HMODEL] == 1.0 and (flags & HYST) != 0
     mu = p[MU_LOAD] if (flags & LOADDEP) else 0.0
+    amp_on = (flags & AMP) != 0
+    imax = p[I_MAX]
+    inv_res = 1.0 / p[RES]
+    v_hi = p[V_MAX] * inv_res
+    kb_r = p[KB] * inv_res
+    kt = p[KT]
+    cdamp = p[CDAMP]
+    grav = p[GRAV]
+    t_load0 = p[LOAD_T] + t_ext
+    vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk = _visc_consts(p, FIN, flags)
+    vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk = _visc_consts(p, FOUT, flags)
+    th_m = x[TH_M]
+    th_o = x[TH_O]
+    for k in range(nke):
+        _set_phase(trig, k, p[KE_ORD + k] * th_m + p[KE_PH + k])
+    if grav != 0.0:
+        _set_phase(trig, _GRAV_PHASE, th_o)
+    nrip_in = 0
+    nrip_out = 0
+    if flags & POSDEP:
+        nrip_in = _init_ripples(trig, p, 0, FIN, th_m, th_o)
+        nrip_out = _init_ripples(trig, p, 1, FOUT, th_m, th_o)
+    w_m = x[W_M]
+    w_o = x[W_O]
+    cur = x[CUR]
+    dth_prev = x[DTH]
+    e_diss = x[E_DISS]
+    w_motor = x[W_MOTOR]
+    w_load = x[W_LOAD]
+    t_k = x[TK]
+    t_m = x[T_MOTOR]
+    t_load = x[T_LOAD]
     for _ in range(n_sub):
-        th_m = x[TH_M]
-        w_m = x[W_M]
-        th_o = x[TH_O]
-        w_o = x[W_O]
         # --- kinematic error and torsion
         ke = 0.0
         dke = 0.0
         for k in range(nke):
-            a = p[KE_ORD + k] * th_m + p[KE_PH + k]
             amp = p[KE_AMP + k]
-            ke += amp * math.sin(a)
-            dke += amp * p[KE_ORD + k] * math.cos(a)
+            ke += amp * trig[k]
+            dke += amp * p[KE_ORD + k] * trig[N_PHASES + k]
         dth = th_m * inv_r - th_o - ke
         gear = inv_r - dke
         ddth = w_m * gear - w_o
-        d_inc = dth - x[DTH]
-        x[DTH] = dth
+        d_inc = dth - dth_prev
+        dth_prev = dth
         # --- hysteresis
         t_h = 0.0
         diss = 0.0
@@ -265,51 +379,78 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
                     f = -wk
                 x[HZ + k] = f
                 t_h += f
-        t_d = p[CDAMP] * ddth
-        t_k = spring_torque(dth, p, flags) + t_d + t_h
-        x[TK] = t_k
+        t_k = spring_torque(dth, p, flags) + cdamp * ddth + t_h
         # --- amplifier and current loop
         i_t = i_cmd
-        if flags & AMP:
-            imax = p[I_MAX]
+        if amp_on:
             if i_t > imax:
                 i_t = imax
             elif i_t < -imax:
                 i_t = -imax
-            hi = (p[V_MAX] - p[KB] * w_m) / p[RES]
-            lo = (-p[V_MAX] - p[KB] * w_m) / p[RES]
-            if i_t > hi:
-                i_t = hi
-            elif i_t < lo:
-                i_t = lo
-        cur = x[CUR] + alpha * (i_t - x[CUR])
-        x[CUR] = cur
-        t_m = p[KT] * cur
-        x[T_MOTOR] = t_m
+            back = kb_r * w_m
+            if i_t > v_hi - back:
+                i_t = v_hi - back
+            elif i_t < -v_hi - back:
+                i_t = -v_hi - back
+        cur = cur + alpha * (i_t - cur)
+        t_m = kt * cur
         # --- motor side
-        lvl = _friction_level(p, FIN, w_m, th_m, th_o, 0.0, flags)
-        vis = _viscous_coeff(p, FIN, w_m, flags)
-        w_m_new, pm = _advance(w_m, t_m - t_k * gear, jm, vis, lvl, dt)
+        lvl = _level(p, FIN, w_m, 0.0, flags, trig, _RIP0[0], nrip_in)
+        vis = _visc(vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk, w_m)
+        w_m_new, pm = _advance(w_m, t_m - t_k * gear, h_m, vis, lvl)
         # --- output side
-        t_load = p[LOAD_T] + t_ext
-        if p[GRAV] != 0.0:
-            t_load += p[GRAV] * math.sin(th_o)
+        t_load = t_load0
+        if grav != 0.0:
+            t_load += grav * trig[_GRAV_PHASE]
         if locked:
             w_o_new = 0.0
             po = 0.0
         else:
-            lvl = _friction_level(p, FOUT, w_o, th_m, th_o, mu * abs(t_k), flags)
-            vis = _viscous_coeff(p, FOUT, w_o, flags)
-            w_o_new, po = _advance(w_o, t_k - t_load, jo, vis, lvl, dt)
-        x[T_LOAD] = t_load
-        # --- positions and bookkeeping
-        x[W_M] = w_m_new
-        x[W_O] = w_o_new
-        x[TH_M] = th_m + dt * w_m_new
-        x[TH_O] = th_o + dt * w_o_new
-        x[E_DISS] += dt * (pm + po + p[CDAMP] * ddth * ddth) + diss
-        x[W_MOTOR] += dt * t_m * w_m_new
-        x[W_LOAD] -= dt * t_load * w_o_new
+            lvl = _level(p, FOUT, w_o, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
+            vis = _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, w_o)
+            w_o_new, po = _advance(w_o, t_k - t_load, h_o, vis, lvl)
+        # --- positions, bookkeeping and the phases of the new angles
+        d_m = dt * w_m_new
+        d_o = dt * w_o_new
+        w_m = w_m_new
+        w_o = w_o_new
+        th_m = th_m + d_m
+        th_o = th_o + d_o
+        e_diss += dt * (pm + po + cdamp * ddth * ddth) + diss
+        w_motor += dt * t_m * w_m_new
+        w_load -= dt * t_load * w_o_new
+        for k in range(nke):
+            _rotate(trig, k, p[KE_ORD + k] * d_m)
+        if nrip_in:
+            _rotate_ripples(trig, p, 0, FIN, nrip_in, d_m, d_o)
+        if nrip_out:
+            _rotate_ripples(trig, p, 1, FOUT, nrip_out, d_m, d_o)
+        if grav != 0.0:
+            _rotate(trig, _GRAV_PHASE, d_o)
+    x[TH_M] = th_m
+    x[W_M] = w_m
+    x[TH_O] = th_o
+    x[W_O] = w_o
+    x[CUR] = cur
+    x[TK] = t_k
+    x[DTH] = dth_prev
+    x[E_DISS] = e_diss
+    x[W_MOTOR] = w_motor
+    x[W_LOAD] = w_load
+    x[T_LOAD] = t_load
+    x[T_MOTOR] = t_m
+
+
+@_jit
+def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
+             n_sub: int, flags: int) -> None:
+    """Advance one env's state ``x`` in place by ``n_sub`` substeps of ``dt`` s.
+
+    ``i_cmd`` is the current command (A); ``t_ext`` an external load torque
+    (N m, resisting positive output motion) added to the preset's load.
+    Batched callers should use :func:`substeps_with` and reuse the scratch.
+    """
+    substeps_with(x, p, i_cmd, t_ext, dt, n_sub, flags, np.empty(SCRATCH))
 
 
 @_jit
@@ -320,21 +461,29 @@ def _bad(x: np.ndarray) -> bool:
     return abs(x[W_M]) > 1e7 or abs(x[TK]) > 1e9
 
 
+#: envs per scratch buffer in the threaded step
+_CHUNK = 32
+
+
 @nb.njit(cache=True, parallel=True, nogil=True)
 def step_parallel(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray,
                   dt: float, n_sub: int, flags: np.ndarray, bad: np.ndarray) -> None:
     """Advance a batch ``xs (n, N_STATE)`` with parameters ``ps (n, N_PARAMS)`` (threads)."""
-    for e in nb.prange(xs.shape[0]):
-        substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e])
-        bad[e] = _bad(xs[e])
+    n = xs.shape[0]
+    for c in nb.prange((n + _CHUNK - 1) // _CHUNK):
+        trig = np.empty(SCRATCH)
+        for e in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
+            substeps_with(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
+            bad[e] = _bad(xs[e])
 
 
 @_jit
 def step_serial(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray,
                 dt: float, n_sub: int, flags: np.ndarray, bad: np.ndarray) -> None:
     """Same as :func:`step_parallel` on one thread (cheaper for small batches)."""
+    trig = np.empty(SCRATCH)
     for e in range(xs.shape[0]):
-        substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e])
+        substeps_with(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
         bad[e] = _bad(xs[e])
 
 
@@ -357,8 +506,9 @@ def run_open_loop(x: np.ndarray, p: np.ndarray, i_cmd: np.ndarray, t_ext: np.nda
     ``out`` has shape ``(len(i_cmd), N_STATE)``. Returns the index of the
     first step whose state diverged, or -1.
     """
+    trig = np.empty(SCRATCH)
     for k in range(i_cmd.shape[0]):
-        substeps(x, p, i_cmd[k], t_ext[k], dt, n_sub, flags)
+        substeps_with(x, p, i_cmd[k], t_ext[k], dt, n_sub, flags, trig)
         for j in range(N_STATE):
             out[k, j] = x[j]
         if _bad(x):
