@@ -22,6 +22,7 @@ import numba
 import numpy as np
 
 import hdgym.envs
+from hdgym.physics.lanes import LaneBatch
 
 JOINT = "HarmonicDriveJoint-v0"
 
@@ -78,12 +79,13 @@ def _compare(name: str, ref_name: str, target: float, mine: Callable[[], int],
 def _kernel_rate(venv: Any, steps: int) -> float:
     """Env-steps/s of the bare compiled physics on a copy of the vector env's batch."""
     b = venv.unwrapped.batch
-    xs, flags, bad = b.xs.copy(), b.flags, b.bad.copy()
+    xs, bad = b.xs.copy(), b.bad.copy()
+    lanes = LaneBatch(xs, b.rows, b.flags, b.dt, parallel=b.lanes.parallel)
     i_cmd = np.full(b.n, 0.5 * b.current_limit)
 
     def run() -> int:
         for _ in range(steps):
-            b.kernel_step(xs, b.rows, i_cmd, b.t_ext, b.dt, b.n_substeps, flags, bad)
+            lanes.step(i_cmd, b.t_ext, b.n_substeps, xs, bad)
         return steps * b.n
 
     run()
@@ -133,9 +135,9 @@ def bench_envs(quick: bool = False, preset: Any = None) -> list[dict[str, Any]]:
                    _vector_runner(venv, av), _vector_runner(cart, ac))
     bare = _kernel_rate(venv, steps)
     vb = venv.unwrapped.batch
-    row["note"] = (f"the compiled physics alone (kernel.{vb.kernel_step.__name__}, "
-                   f"{vb.n_substeps} substeps per step, "
-                   f"{numba.config.NUMBA_NUM_THREADS} threads) runs {bare:,.0f} env-steps/s at "
+    where = f"{numba.config.NUMBA_NUM_THREADS} threads" if vb.lanes.parallel else "one thread"
+    row["note"] = (f"the compiled physics alone (SIMD lanes, {where}, "
+                   f"{vb.n_substeps} substeps per step) runs {bare:,.0f} env-steps/s at "
                    f"{n_vec} envs, i.e. at most {bare / row['reference_value']:.2f} of CartPole; "
                    f"the env layer keeps {row['value'] / bare:.0%} of it")
     out.append(row)

@@ -31,8 +31,8 @@ from hdgym.effects import check_effects, flags_of
 from hdgym.envs.tasks import N_COMMON, OBS_BOUND
 from hdgym.hardware import CHANNELS, SensorBank
 from hdgym.params import JointParams, preset
-from hdgym.physics import kernel
 from hdgym.physics import layout as L
+from hdgym.physics.lanes import PARALLEL_THRESHOLD, LaneBatch
 
 DEFAULT_PRESET = "tuttle-joint1"
 #: sensor-noise samples drawn per env at a time
@@ -218,7 +218,9 @@ class JointBatch:
         # noise is drawn per env by this class (see module docstring), not by the bank
         quiet = replace(sens, torque_noise=0.0, current_noise=0.0)
         self.bank = SensorBank.from_params(n, quiet, ctrl_dt, np.random.default_rng(0))
-        self.kernel_step = kernel.step_for(n)
+        # the physics runs in SIMD lanes (hdgym.physics.lanes); ``xs`` mirrors its state
+        self.lanes = LaneBatch(self.xs, self.rows, self.flags, self.dt,
+                               parallel=n >= PARALLEL_THRESHOLD)
         self.post = task.post
 
     # ------------------------------------------------------------ episodes
@@ -238,6 +240,7 @@ class JointBatch:
         th = np.array([self._draw_episode(int(i)) for i in idx])
         x0 = L.initial_state(self.rows[idx], self.flags[idx], motor_angle=th)
         self.xs[idx] = x0
+        self.lanes.load(self.xs, self.rows, self.flags, idx)
         self.bad[idx] = False
         self.steps[idx] = 0
         self.act[idx] = 0.0
@@ -270,8 +273,7 @@ class JointBatch:
         Envs in ``reset_mask`` start a new episode instead (autoreset): their
         observation is the first of the new episode, reward 0, not terminated.
         """
-        self.kernel_step(self.xs, self.rows, self.i_cmd, self.t_ext, self.dt, self.n_substeps,
-                         self.flags, self.bad)
+        self.lanes.step(self.i_cmd, self.t_ext, self.n_substeps, self.xs, self.bad)
         meas = self.bank.measure(self.xs)
         self.steps += 1
         fresh = self.no_fresh
@@ -347,8 +349,10 @@ class HarmonicDriveEnv(gym.Env):
 
     @property
     def state(self) -> np.ndarray:
-        """The true physics state row (see :data:`hdgym.physics.layout.STATE_NAMES`)."""
-        return self.batch.xs[0]
+        """The true physics state row (see :data:`hdgym.physics.layout.STATE_NAMES`), read-only."""
+        row = self.batch.xs[0].view()
+        row.flags.writeable = False
+        return row
 
     @property
     def param_row(self) -> np.ndarray:

@@ -3,10 +3,10 @@
 ``gym.make_vec("HarmonicDriveJoint-v0", num_envs=n,
 vectorization_mode="vector_entry_point")`` returns a
 :class:`HarmonicDriveVectorEnv`. Every env carries its own parameter row
-(randomized per episode when ``randomize`` is given). Batches of 1,024 envs
-and more (``kernel.PARALLEL_THRESHOLD``) step on all cores
-(``kernel.step_parallel``), smaller ones on one (``kernel.step_serial``); the
-results are the same.
+(randomized per episode when ``randomize`` is given). The physics runs in
+SIMD lanes (:mod:`hdgym.physics.lanes`); batches of
+``lanes.PARALLEL_THRESHOLD`` envs and more spread over all cores. The
+results are the same either way.
 
 Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
 be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
@@ -35,7 +35,6 @@ from gymnasium.vector.utils import batch_space
 from hdgym.envs.common import INFO_STATES, JointBatch, action_space, observation_space
 from hdgym.envs.tasks import ResonanceTask, TrackingTask
 from hdgym.hardware import action_to_current
-from hdgym.physics import kernel
 from hdgym.physics import layout as L
 
 
@@ -70,7 +69,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.batch = JointBatch(task, self.num_envs, **kwargs)
         if parallel is not None:
-            self.batch.kernel_step = kernel.step_parallel if parallel else kernel.step_serial
+            self.batch.lanes.parallel = bool(parallel)
         self.task = task
         self.params = self.batch.params
         self.max_episode_steps = max_episode_steps

@@ -22,7 +22,6 @@ step is :mod:`hdgym.physics.reference`.
 from __future__ import annotations
 
 import math
-import os
 
 import numba as nb
 import numpy as np
@@ -89,13 +88,6 @@ from hdgym.physics.layout import (
     W_MOTOR,
     W_O,
 )
-
-# Numba's default OpenMP layer busy-waits between parallel regions; on a shared
-# machine (or beside torch's own OpenMP threads during RL training) that made
-# step_parallel 3-8x slower than one thread. The work-queue layer sleeps
-# instead. A layer chosen by the user (NUMBA_THREADING_LAYER) is kept.
-if "NUMBA_THREADING_LAYER" not in os.environ:
-    nb.config.THREADING_LAYER = "workqueue"
 
 KE = BIT["kinematic_error"]
 NONLIN = BIT["nonlinear_stiffness"]
