@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 from scipy.optimize import least_squares
 
-from hdgym.effects import flags_of
+from hdgym.effects import BIT, flags_of
 from hdgym.params import Integration, JointParams
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
@@ -66,6 +66,72 @@ def _inverse_friction(p, flags, w_m, th_m, th_o, w_o, t_k, mu, out_in, out_out):
         out_out[k] = lvl * math.copysign(1.0, w_o[k]) + vis * w_o[k]
 
 
+def _pauses(angle: np.ndarray, m: int) -> np.ndarray:
+    """Samples inside a run of at least ``m`` + 1 samples with the same encoder count."""
+    same = np.diff(angle) == 0
+    out = np.zeros(angle.size, dtype=bool)
+    run = 0
+    for k, s in enumerate(np.append(same, False)):
+        if s:
+            run += 1
+            continue
+        if run >= m:
+            out[k - run:k + 1] = True
+        run = 0
+    return out
+
+
+def _holdable(torque: float, t_motor: float, t_load: float, gear: float, row: np.ndarray,
+              flags: int, th_m: float, th_o: float) -> float:
+    """The transmitted torque nearest ``torque`` at which the model can stand still.
+
+    At rest the output friction must hold ``torque - t_load`` and the motor
+    friction ``t_motor - gear torque``, each within its static level (the
+    model's own, at this angle). A measured held torque the model cannot hold is
+    clipped to what it can (when the two sides allow no common torque, to what the
+    output side can hold and the motor slips), so a restart never starts the model
+    with a slip it could not have reached (the cost stays continuous in the static
+    levels) while the torque it fails to hold still shows in the residual.
+    """
+    mu = row[L.MU_LOAD] if flags & BIT["load_dependent_friction"] else 0.0
+    l_out = kernel._friction_level(row, L.FOUT, 0.0, th_m, th_o, mu * abs(torque), flags)
+    l_in = kernel._friction_level(row, L.FIN, 0.0, th_m, th_o, 0.0, flags)
+    lo, hi = t_load - l_out, t_load + l_out
+    if gear > 0:
+        lo_m, hi_m = (t_motor - l_in) / gear, (t_motor + l_in) / gear
+        if max(lo, lo_m) <= min(hi, hi_m):
+            lo, hi = max(lo, lo_m), min(hi, hi_m)
+    return min(max(torque, lo), hi)
+
+
+def _held_torsion(torque: float, x: np.ndarray, row: np.ndarray, flags: int) -> float:
+    """Torsion (output rad) at which the model's flexspline holds ``torque`` at rest.
+
+    The hysteresis memory in ``x`` is kept; the spring takes the rest (the spring
+    torque is monotonic in the torsion, so bisection finds it).
+    """
+    t_h = 0.0
+    if flags & BIT["hysteresis"]:
+        t_h = (x[L.HZ + 3] if row[L.HMODEL] == 1.0
+               else float(np.sum(x[L.HZ:L.HZ + int(row[L.NSLIP])])))
+    target = torque - t_h
+    x0 = target / row[L.K1]
+    lo, hi = x0 - abs(x0) - 1e-9, x0 + abs(x0) + 1e-9
+    while kernel.spring_torque(lo, row, flags) > target:
+        lo -= 2 * (hi - lo)
+    while kernel.spring_torque(hi, row, flags) < target:
+        hi += 2 * (hi - lo)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if kernel.spring_torque(mid, row, flags) < target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * max(abs(mid), 1e-12):
+            break
+    return 0.5 * (lo + hi)
+
+
 @dataclass
 class Problem:
     """A record prepared for comparison with models.
@@ -86,8 +152,9 @@ class Problem:
             (0 or None: one run). Restarts happen only while the measured
             joint moves (faster than 10 % of its typical speed), or early in a
             pause in which the measured joint stands still (no encoder count
-            for :data:`REST_PAUSE`; restarted at zero speed), so sticking and
-            breakaway stay the model's own.
+            for :data:`REST_PAUSE`; restarted at zero speed and, with a torque
+            sensor, at the measured held torque), so sticking and breakaway stay
+            the model's own.
     """
 
     record: Record
@@ -152,6 +219,10 @@ class Problem:
     def _m(self, x: np.ndarray) -> np.ndarray:
         return x if self.mask is None else x[self.mask]
 
+    stick_slip: bool = field(init=False, default=False)
+    """Whether the joint stops and sticks in the record (restarts at rest; see
+    :func:`fit`'s ``search``)."""
+
     def _prepare_inverse(self) -> None:
         th_o = lowpass_ = R.lowpass(self.raw.output_angle, self.dt, self.cutoff)
         self.th_o = lowpass_
@@ -179,7 +250,43 @@ class Problem:
             torque = self.params.motor.torque_constant * self.ratio * current
         return R.Context(time=np.asarray(self.record.time), theta_m=th_m, speed=speed,
                          torsion=torsion, torque=torque, current=current, dt=self.dt,
-                         cutoff=self.cutoff)
+                         cutoff=self.cutoff, held=self._held(speed))
+
+    def _held(self, speed: np.ndarray) -> dict[str, R.Held]:
+        """The torque each friction side holds while it sticks (see :class:`.residuals.Held`).
+
+        With a compared torque sensor the two sides separate: the output side holds
+        the transmitted torque minus the load, the motor side the motor torque minus
+        the transmitted torque through the gear. Without one, the motor torque
+        through the gear minus the load is what the joint holds as a whole
+        (``lumped``). Empty in the inverse comparison and when nothing pauses.
+        """
+        if self.inverse:
+            return {}
+        raw, p, r, dt = self.raw, self.params, self.ratio, self.dt
+        m = int(round(REST_PAUSE / dt))
+        motor_stuck = _pauses(np.asarray(raw.motor_angle, dtype=float), m)
+        out: dict[str, R.Held] = {}
+        sensor = "output_torque" in self.names
+        t_k = np.asarray(raw.output_torque, dtype=float) if sensor else None
+        if raw.motor_current is not None:
+            kt_i = p.motor.torque_constant * np.asarray(raw.motor_current, dtype=float)
+        else:
+            kt_i = p.motor.torque_constant * self.u
+        if t_k is not None and motor_stuck.any():
+            out["input"] = R.Held(kt_i - t_k / r, speed, motor_stuck)
+        if not self.locked:
+            th_o = (np.asarray(raw.output_angle, dtype=float) if raw.output_angle is not None
+                    else np.asarray(raw.motor_angle, dtype=float) / r)
+            load = p.load.torque + self.t_ext
+            if p.load.gravity:
+                load = load + p.load.gravity * np.sin(th_o)
+            out_stuck = (_pauses(th_o, m) if raw.output_angle is not None else motor_stuck)
+            if out_stuck.any():
+                held = t_k - load if t_k is not None else kt_i * r - load
+                out["output" if t_k is not None else "lumped"] = R.Held(held, speed / r,
+                                                                        out_stuck)
+        return out
 
     def _scales(self) -> Scales:
         p = self.params
@@ -200,10 +307,12 @@ class Problem:
                                    + p.motor.back_emf_constant * c.speed)))
         te = float(np.std(self.measured["transmission_error"])) \
             if "transmission_error" in self.measured else 0.0
+        static = tuple((side, *lv) for side, h in c.held.items()
+                       if (lv := R.friction_levels(h, self.dt, self.cutoff)) is not None)
         return Scales(torque=torque, speed=speed, torsion=torsion, current=cur,
                       current_measured=cm, voltage=volt, locked=self.locked,
                       inverse=self.inverse, transmission_error=te, ke=self._ke_guess(),
-                      ripple=self._ripple_guess())
+                      ripple=self._ripple_guess(), static=static)
 
     def _harmonics(self, y: np.ndarray, orders: tuple[float, ...],
                    keep: np.ndarray | None = None) -> tuple[tuple[float, float, float], ...]:
@@ -270,6 +379,7 @@ class Problem:
                       if self.raw.motor_current is not None else None)
         self.x_rest_angle = np.asarray(self.raw.motor_angle, dtype=float) + qm / 2
         self.rest_points = self._rest_points()
+        self.stick_slip = bool(self.rest_points.size)
 
     def _rest_points(self) -> np.ndarray:
         """Samples shortly after the measured joint has come to rest.
@@ -279,14 +389,21 @@ class Problem:
         the measured state is exact (speeds zero, angles known to a count), so a
         segment can restart from it without injecting a speed error, while the
         rest of the pause and the breakaway that ends it stay the model's own (a
-        model that breaks away too early or too late shows it).
+        model that breaks away too early or too late shows it). With a torque sensor
+        the torque the stuck joint holds is known too (``rest_torque``, its mean over
+        the pause), so the restart also takes the measured torsion: a stop whose held
+        torque the model got wrong (it depends on the phase of the ringing at the
+        stop) does not carry into the next breakaway, and each breakaway is compared
+        from the measured state, event by event.
         """
         m = int(round(REST_PAUSE / self.dt))
         margin = int(round(REST_MARGIN / self.dt))
         still = np.diff(self.raw.motor_angle) == 0
         if self.raw.output_angle is not None:
             still &= np.diff(np.asarray(self.raw.output_angle, dtype=float)) == 0
-        out = []
+        torque = (np.asarray(self.raw.output_torque, dtype=float)
+                  if "output_torque" in self.names else None)
+        out, held = [], []
         run = 0
         for k, s in enumerate(np.append(still, False)):  # still[k]: no count from k to k+1
             if s:
@@ -294,7 +411,10 @@ class Problem:
                 continue
             if run >= m:
                 out.append(k - run + margin)
+                if torque is not None:  # samples k - run .. k share their counts
+                    held.append(float(np.mean(torque[k - run:k + 1])))
             run = 0
+        self.rest_torque = np.asarray(held) if torque is not None else None
         return np.asarray(out, dtype=int)
 
     def _restart(self, x: np.ndarray, k: int, p: JointParams, at_rest: bool = False
@@ -303,7 +423,9 @@ class Problem:
 
         The output follows with the simulation's own torsion and torsion rate (and
         hysteresis memory), so a restart injects no torque: only the drift of the
-        motor angle is removed.
+        motor angle is removed. At rest with a torque sensor, the torsion is the one
+        at which the model holds the measured torque (:func:`_holdable`,
+        :func:`_held_torsion`).
         """
         r = self.ratio
         row = L.pack(p)
@@ -322,20 +444,28 @@ class Problem:
         k0, d0 = ke(x[L.TH_M])
         tors = x[L.TH_M] / r - x[L.TH_O] - k0
         rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
+        if self.x_cur is not None:
+            x[L.CUR] = self.x_cur[k]
         if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
             x[L.TH_M] = self.x_rest_angle[k]
             x[L.W_M] = 0.0
-            k1, _ = ke(x[L.TH_M])
+            k1, d1 = ke(x[L.TH_M])
             x[L.TH_O] = x[L.TH_M] / r - k1 - tors
             x[L.W_O] = 0.0
+            if self.rest_torque is not None:  # and the torque it holds
+                flags = flags_of(p.effects)
+                t_load = row[L.LOAD_T] + self.t_ext[k] + row[L.GRAV] * math.sin(x[L.TH_O])
+                held = _holdable(float(self.rest_torque[np.searchsorted(self.rest_points, k)]),
+                                 row[L.KT] * x[L.CUR], t_load, 1 / r - d1, row, flags,
+                                 x[L.TH_M], x[L.TH_O])
+                tors = _held_torsion(held, x, row, flags)
+                x[L.TH_O] = x[L.TH_M] / r - k1 - tors
         else:
             x[L.TH_M] = self.x_th_m[k]
             x[L.W_M] = self.x_w_m[k]
             k1, d1 = ke(x[L.TH_M])
             x[L.TH_O] = x[L.TH_M] / r - k1 - tors
             x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
-        if self.x_cur is not None:
-            x[L.CUR] = self.x_cur[k]
         x[L.DTH] = tors
         return x
 
@@ -455,11 +585,15 @@ rough on a finer scale)."""
 
 
 def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 40,
-        decimate: int | None = None, diff_step: float | None = None) -> FitResult:
+        decimate: int | None = None, diff_step: float | None = None,
+        search: bool = False) -> FitResult:
     """Bounded least squares of ``fps`` (starting at their guesses or current values).
 
     Variables are scaled to their bounds (``z = 1 + (x - lo)/(hi - lo)``) so
     a relative finite-difference step (:data:`DIFF_STEP`) is that share of each range.
+    With ``search`` on a stick-slip record (:attr:`Problem.stick_slip`), a
+    coordinate search (:func:`_pattern_search`) continues from the least-squares
+    result.
     """
     from .registry import get_value
 
@@ -491,7 +625,49 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     sol = least_squares(fun, z0, bounds=(np.ones_like(z0), 2 * np.ones_like(z0)), method="trf",
                         diff_step=diff_step or DIFF_STEP, max_nfev=max_nfev, ftol=1e-6,
                         xtol=1e-6, gtol=1e-8)
-    best = build(sol.x)
+    z, nfev = sol.x, int(sol.nfev)
+    if search and problem.stick_slip:
+        z, n = _pattern_search(lambda v: float(np.sum(fun(v) ** 2)), np.clip(z, 1.0, 2.0),
+                               SEARCH_BUDGET * len(fps))
+        nfev += n
+    best = build(z)
     values = {fp.path: float(get_value(best, fp.path)) for fp in fps}
     nm = problem.nmse(best)
-    return FitResult(best, values, nm, int(sol.nfev), nm["mean"] / 100)
+    return FitResult(best, values, nm, nfev, nm["mean"] / 100)
+
+
+SEARCH_STEPS = (0.04, 0.02, 0.01, 0.005)
+"""Coordinate-search steps, as shares of each parameter's range (:func:`_pattern_search`)."""
+SEARCH_BUDGET = 30
+"""Cost evaluations per parameter a coordinate search may spend."""
+
+
+def _pattern_search(cost, z: np.ndarray, budget: int) -> tuple[np.ndarray, int]:
+    """Bounded coordinate search on ``z`` in ``[1, 2]`` (steps :data:`SEARCH_STEPS`).
+
+    Stick-slip makes the cost piecewise constant on a fine scale (each breakaway
+    and slip happens at a whole substep, the simulated angles are quantized like
+    the encoders), so a finite-difference Jacobian sees steps rather than a slope
+    and least squares stops early; comparing costs a few per cent of each range
+    apart follows the trend. Returns the best point and the evaluations spent.
+    """
+    best = cost(z)
+    n = 1
+    for step in SEARCH_STEPS:
+        improved = True
+        while improved and n < budget:
+            improved = False
+            for i in range(z.size):
+                for sgn in (1.0, -1.0):
+                    y = z.copy()
+                    y[i] = min(max(z[i] + sgn * step, 1.0), 2.0)
+                    if y[i] == z[i]:
+                        continue
+                    c = cost(y)
+                    n += 1
+                    if c < best:
+                        best, z, improved = c, y, True
+                        break
+                if n >= budget:
+                    break
+    return z, n

@@ -157,6 +157,10 @@ class Scales:
             transmission error.
         ripple: ``(order, a, b)`` guesses of output-side friction ripple (N m),
             regressed from the measured acceleration while moving.
+        static: ``(side, static, running)`` friction levels read from the record's
+            pauses and runs (:func:`.residuals.friction_levels`; side ``output``,
+            ``input`` or ``lumped``, N m in the side's frame): the largest torque
+            held while stuck and the sign-of-velocity level while moving.
     """
 
     torque: float
@@ -170,6 +174,7 @@ class Scales:
     transmission_error: float = 0.0
     ke: tuple[tuple[float, float, float], ...] = ()
     ripple: tuple[tuple[float, float, float], ...] = ()
+    static: tuple[tuple[str, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -192,6 +197,9 @@ class Effect:
         description: one line for reports.
         requires: effects that must be on for this one to act.
         testable: ``testable(scales)`` -> whether the record can show it at all.
+        sized: ``sized(scales)`` -> whether :meth:`switch_on` reads its size
+            parameters (those with lower bound 0) from the record; the trial start
+            then searches near them instead of over their whole range.
     """
 
     name: str
@@ -202,6 +210,7 @@ class Effect:
     _neutral: Callable[[dict[str, Any]], None] = field(repr=False)
     requires: tuple[str, ...] = ()
     testable: Callable[[Scales], bool] = field(default=lambda s: True, repr=False)
+    sized: Callable[[Scales], bool] = field(default=lambda s: False, repr=False)
 
     def fit_params(self, p: JointParams, s: Scales) -> list[FitParam]:
         """Parameters to fit for this effect, with bounds (containing the current value)."""
@@ -437,11 +446,55 @@ def _strib_params(p, s):
 
 
 def _strib_on(p, s):
-    out = {}
+    out = _static_on(p, s, 0.02, running=False)
     for side in _one_side(s):
-        out[f"friction.{side}.breakaway_excess"] = 0.02 * _t_side(p, s, side)
         out[f"friction.{side}.stribeck_velocity"] = 0.05 * _w_side(p, s, side)
     return out
+
+
+def _levels(p: JointParams, s: Scales, side: str) -> tuple[float, float] | None:
+    """``(static, running)`` levels of one friction side from the record, or None.
+
+    A ``lumped`` reading (no torque sensor) goes to the output side, less what the
+    model's motor side holds through the gear.
+    """
+    got = {name: (st, run) for name, st, run in s.static}
+    if side in got:
+        return got[side]
+    if side == "output" and "lumped" in got:
+        fi = p.friction.input
+        st, run = got["lumped"]
+        return max(st - fi.breakaway * p.ratio, 0.0), max(run - fi.coulomb * p.ratio, 0.0)
+    return None
+
+
+def _static_on(p, s, default: float, running: bool = True) -> dict[str, float]:
+    """A static (breakaway) level switched on: from the record's levels where it has them.
+
+    The largest torque held while stuck sets the breakaway level. For stiction
+    (``running``) the running level sets ``coulomb`` too: the base fit had to
+    stretch its Coulomb level towards the breakaway, and with a static level
+    present the record's running level is the better start. (Stribeck friction
+    keeps the fitted level: its friction falls with speed, so the level averaged
+    over the runs is not its Coulomb level.) Sides the record cannot show start at
+    ``default`` x the side's torque scale.
+    """
+    out = {}
+    for side in _one_side(s):
+        lv = _levels(p, s, side)
+        if lv is None or lv[1] <= 0:
+            out[f"friction.{side}.breakaway_excess"] = default * _t_side(p, s, side)
+            continue
+        static, run = lv
+        coulomb = run if running else getattr(p.friction, side).coulomb
+        if running:
+            out[f"friction.{side}.coulomb"] = coulomb
+        out[f"friction.{side}.breakaway_excess"] = max(static - coulomb, 0.0)
+    return out
+
+
+def _static_sized(s: Scales) -> bool:
+    return bool(s.static)
 
 
 def _stick_params(p, s):
@@ -450,8 +503,7 @@ def _stick_params(p, s):
 
 
 def _stick_on(p, s):
-    return {f"friction.{side}.breakaway_excess": 0.02 * _t_side(p, s, side)
-            for side in _one_side(s)}
+    return _static_on(p, s, 0.02)
 
 
 def _break_neutral(d):
@@ -518,11 +570,12 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
            _visc_params, _visc_on, _visc_neutral),
     Effect("stribeck_friction", "speed_bins_low",
            "Stribeck friction: extra friction that decays with speed",
-           _strib_params, _strib_on, _break_neutral, requires=("coulomb_friction",)),
+           _strib_params, _strib_on, _break_neutral, requires=("coulomb_friction",),
+           sized=_static_sized),
     Effect("stiction", "breakaway",
            "stiction: breakaway torque above the running friction",
            _stick_params, _stick_on, _break_neutral, requires=("coulomb_friction",),
-           testable=_sim_only),
+           testable=_sim_only, sized=_static_sized),
     Effect("position_dependent_friction", "order_lines_speed",
            "position-dependent friction: friction ripple at orders of the WG angle",
            _posdep_params, _posdep_on, _posdep_neutral, requires=("coulomb_friction",),

@@ -29,7 +29,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import signal as sps
@@ -137,6 +137,51 @@ def _snr_ok(x: np.ndarray, dt: float, cutoff: float, ratio: float = 5.0) -> bool
 
 
 @dataclass
+class Held:
+    """What one friction side holds while it sticks (for the breakaway signature).
+
+    Attributes:
+        torque: unfiltered torque the side's friction must hold, N m in the side's
+            frame (unfiltered, so the zero-phase filter cannot smear the motion that
+            ends a pause into it) (``output``: transmitted torque minus load, output-referred;
+            ``input``: motor torque minus transmitted torque / ratio, motor-referred;
+            ``lumped``, without a torque sensor: motor torque x ratio minus load).
+        speed: the side's speed, rad/s (filtered).
+        stuck: samples inside a pause of the side's encoder (no count for
+            :data:`hdgym.discrepancy.fitting.REST_PAUSE` or longer).
+    """
+
+    torque: np.ndarray
+    speed: np.ndarray
+    stuck: np.ndarray
+
+
+MIN_MOVING = 50
+"""Least number of moving samples for a running-friction level."""
+
+
+def friction_levels(h: Held, dt: float, cutoff: float) -> tuple[float, float] | None:
+    """``(static, running)`` friction levels of one side, read from the record alone.
+
+    *static* is the largest torque the side held while stuck (a lower bound of its
+    breakaway torque: had the torque exceeded it, the side would have moved);
+    *running* is the sign-of-velocity term of a least-squares fit of the (filtered)
+    torque to ``F sgn(w) + b w + J dw/dt`` over the samples where the side moves
+    (faster than 20 % of its 90th-percentile speed). None without a pause or motion.
+    """
+    if not h.stuck.any():
+        return None
+    w = h.speed
+    moving = np.abs(w) > 0.2 * float(np.quantile(np.abs(w), 0.9))
+    if int(moving.sum()) < MIN_MOVING:
+        return None
+    X = np.column_stack([np.sign(w), w, np.gradient(w, dt)])[moving]
+    beta, *_ = np.linalg.lstsq(X, lowpass(h.torque, dt, cutoff)[moving], rcond=None)
+    static = float(np.max(np.abs(h.torque[h.stuck])))
+    return static, max(float(beta[0]), 0.0)
+
+
+@dataclass
 class Context:
     """Measured quantities the signatures and the localization use (all filtered).
 
@@ -148,6 +193,8 @@ class Context:
         torque: transmitted torque, N m (sensor, else K_t ratio x current), or None.
         current: measured (else commanded) current, A.
         dt, cutoff: sample period (s) and filter cutoff (Hz).
+        held: per friction side (``output``, ``input`` or ``lumped``), the torque it
+            holds while stuck (:class:`Held`); empty when the record has no pause.
     """
 
     time: np.ndarray
@@ -158,6 +205,7 @@ class Context:
     current: np.ndarray
     dt: float
     cutoff: float
+    held: dict[str, Held] = field(default_factory=dict)
 
 
 def _lstsq_explained(y: np.ndarray, X: np.ndarray) -> tuple[float, np.ndarray]:
@@ -208,13 +256,17 @@ def _regressors(kind: str, c: Context) -> np.ndarray:
     if kind == "speed_bins_low":
         return np.column_stack([sgn * np.exp(-(w / (f * ws)) ** 2) for f in (0.02, 0.1, 0.3)])
     if kind == "breakaway":
-        moving = np.abs(w) > 0.02 * ws
-        start = np.zeros_like(w)
-        idx = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
-        n = max(int(0.05 / c.dt), 1)
-        for i in idx:
-            start[max(i - n, 0):i + n] = np.sign(w[min(i + n, w.size - 1)])
-        return start[:, None]
+        # the torque held while stuck beyond the running friction: a model without a
+        # static level slips there (its torque stays near the running level, so the
+        # torque residual is minus this) and breaks away early (speed residual)
+        cols = []
+        for h in c.held.values():
+            lv = friction_levels(h, c.dt, c.cutoff)
+            if lv is None or lv[0] <= lv[1]:
+                continue
+            excess = np.where(h.stuck, np.maximum(np.abs(h.torque) - lv[1], 0.0), 0.0)
+            cols.append(np.sign(h.torque) * excess)
+        return np.column_stack(cols) if cols else np.zeros((w.size, 0))
     if kind == "torque_dependence":
         if c.torque is None:
             return np.zeros((w.size, 0))
@@ -262,6 +314,12 @@ def signature(kind: str, residuals: Mapping[str, np.ndarray], weights: Mapping[s
             best_ch, best_frac, best_beta = ch, frac * e, beta
     out: dict = {"kind": kind, "explained": expl / total if total > 0 else 0.0,
                  "channel": best_ch}
+    if kind == "breakaway":
+        for side, h in c.held.items():
+            lv = friction_levels(h, c.dt, c.cutoff)
+            if lv is not None:
+                out[side] = {"static": lv[0], "running": lv[1],
+                             "ratio": lv[0] / lv[1] if lv[1] > 0 else None}
     if kind.startswith("order_lines") and best_beta is not None and best_beta.size:
         amps = np.hypot(best_beta[0::2], best_beta[1::2])
         out["orders"] = {str(n): float(a) for n, a in zip((1, 2, 3, 4, 6, 8), amps, strict=True)}

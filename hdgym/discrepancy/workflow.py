@@ -55,6 +55,8 @@ PARSIMONY = 0.75
 """The simpler effect is preferred if it achieves this share of the winner's improvement (on
 the validation record when there is one, see :func:`_simpler_does_nearly_as_well`)."""
 MAX_STEPS = 4
+SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
+"""Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
 
@@ -213,14 +215,20 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
     size = [fp for fp in fps if fp not in shape and fp.lower == 0.0]
     rest = [fp for fp in fps if fp not in shape and fp not in size]
     trials: list[dict[str, float]] = []
+    # size of the grid: a share of each size parameter's upper bound, or, when the record
+    # gave the sizes (eff.sized), a factor on them
+    sized = eff.sized(problem.scales)
+    unit = {fp.path: get_value(q, fp.path) if sized else fp.upper for fp in size}
+    grid, (lo_f, hi_f) = ((SIZED_GRID, (SIZED_GRID[0], SIZED_GRID[-1])) if sized
+                          else (np.geomspace(1e-3, 0.8, 12), (1e-3, 0.8)))
     if size:
         shapes: list[dict[str, float]] = [{}]
         if any(fp.path.endswith("stribeck_velocity") for fp in shape):
             shapes = [{fp.path: fp.lower + g * (fp.upper - fp.lower) for fp in shape
                        if fp.path.endswith("stribeck_velocity")} for g in (0.02, 0.1, 0.4)]
-        for f in np.geomspace(1e-3, 0.8, 12):
+        for f in grid:
             for sh in shapes:
-                trials.append({**{fp.path: f * fp.upper for fp in size}, **sh})
+                trials.append({**{fp.path: f * unit[fp.path] for fp in size}, **sh})
     for f in (0.3, 3.0):
         vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in rest}
         if vals:
@@ -237,19 +245,20 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
         c = cost(vals)
         if c < best_cost:
             best_vals, best_cost = vals, c
-    if size and best_vals:
+    first = size[0].path if size else ""
+    if size and best_vals and unit[first] > 0:
         # the valley of a static friction level is narrow: refine the common fraction
-        f0 = best_vals[size[0].path] / size[0].upper
+        f0 = best_vals[first] / unit[first]
         sh = {k: v for k, v in best_vals.items() if k not in {fp.path for fp in size}}
 
         def along(logf: float) -> float:
-            return cost({**{fp.path: math.exp(logf) * fp.upper for fp in size}, **sh})
+            return cost({**{fp.path: math.exp(logf) * unit[fp.path] for fp in size}, **sh})
 
-        step = math.log(0.8 / 1e-3) / 11
+        step = math.log(hi_f / lo_f) / (len(grid) - 1)
         opt = minimize_scalar(along, bounds=(math.log(f0) - step, math.log(f0) + step),
                               method="bounded", options={"maxiter": 12, "xatol": 0.01})
         if opt.fun < best_cost:
-            best_vals = {**{fp.path: math.exp(opt.x) * fp.upper for fp in size}, **sh}
+            best_vals = {**{fp.path: math.exp(opt.x) * unit[fp.path] for fp in size}, **sh}
     return set_values(q, best_vals) if best_vals else q
 
 
@@ -257,12 +266,18 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
            cand: dict, nfev: int) -> tuple[float, dict, FitResult]:
     """Trial refit with candidate ``cand`` added; records its improvement in ``cand``."""
     # two starts: the current fit, and the given values of the base parameters (a base
-    # fit may have wandered off to mimic the missing effect); keep the cheaper
+    # fit may have wandered off to mimic the missing effect); keep the cheaper start or,
+    # where stick-slip makes the cost at a start a poor guide, the better of both fits
     q = _start(problem, current.params, cand["name"])
     q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
-    if problem.nmse(q2)["mean"] < problem.nmse(q)["mean"]:
-        q = q2
-    res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
+    if problem.stick_slip:
+        fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
+                for s in (q, q2)]
+        res = min(fits, key=lambda f: f.cost)
+    else:
+        if problem.nmse(q2)["mean"] < problem.nmse(q)["mean"]:
+            q = q2
+        res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
     rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
     cand["trial_nmse"] = res.nmse["mean"]
     cand["relative_improvement"] = rel
@@ -391,7 +406,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                f"{gain:.3g} points (threshold {MIN_GAIN:g})")
                 continue
             polished = fit(problem, res.params,
-                           model_params(res.params, problem.scales, params), max_nfev=nfev_polish)
+                           model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
+                           search=True)
             if polished.cost > res.cost:
                 polished = res
             if vprob is not None:
