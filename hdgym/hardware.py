@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 from hdgym.physics import layout as L
@@ -44,6 +45,22 @@ def quantize(angle: np.ndarray, counts_per_rev: np.ndarray | float) -> np.ndarra
     """Angle as an incremental encoder reports it (floor to whole counts), rad."""
     step = 2.0 * math.pi / np.asarray(counts_per_rev, dtype=float)
     return np.floor(np.asarray(angle) / step) * step
+
+
+@nb.njit(cache=True)
+def _read(xs: np.ndarray, steps: np.ndarray, prev: np.ndarray, dt: float, torque_sensor: bool,
+          out: np.ndarray) -> None:
+    """Noise-free reading of every env into ``out`` (rows in :data:`CHANNELS` order):
+    encoders floored to whole counts (``steps`` rad per count, motor and output),
+    velocities from the count difference to ``prev`` (updated), torque, current."""
+    for i in range(xs.shape[0]):
+        for k in range(2):
+            a = math.floor(xs[i, L.TH_M if k == 0 else L.TH_O] / steps[k, i]) * steps[k, i]
+            out[k, i] = a
+            out[2 + k, i] = (a - prev[k, i]) / dt
+            prev[k, i] = a
+        out[4, i] = xs[i, L.TK] if torque_sensor else 0.0
+        out[5, i] = xs[i, L.CUR]
 
 
 class SensorBank:
@@ -92,15 +109,7 @@ class SensorBank:
                    sensors.delay)
 
     def _raw(self, xs: np.ndarray, out: np.ndarray) -> np.ndarray:
-        angles = out[:2]
-        np.divide(xs[:, [L.TH_M, L.TH_O]].T, self._steps, out=angles)
-        np.floor(angles, out=angles)
-        angles *= self._steps
-        np.subtract(angles, self._prev, out=out[2:4])
-        out[2:4] /= self.dt
-        self._prev[:] = angles
-        out[4] = xs[:, L.TK] if self.torque_sensor else 0.0
-        out[5] = xs[:, L.CUR]
+        _read(xs, self._steps, self._prev, self.dt, self.torque_sensor, out)
         if self.torque_noise > 0 and self.torque_sensor:
             out[4] += self.rng.normal(0.0, self.torque_noise, self.n)
         if self.current_noise > 0:

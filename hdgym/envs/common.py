@@ -219,9 +219,13 @@ class JointBatch:
         quiet = replace(sens, torque_noise=0.0, current_noise=0.0)
         self.bank = SensorBank.from_params(n, quiet, ctrl_dt, np.random.default_rng(0))
         # the physics runs in SIMD lanes (hdgym.physics.lanes); ``xs`` mirrors its state
-        self.lanes = LaneBatch(self.xs, self.rows, self.flags, self.dt,
-                               parallel=n >= PARALLEL_THRESHOLD)
-        self.post = task.post
+        self.lanes = LaneBatch(self.xs, self.rows, self.flags, self.dt)
+        self.use_threads(n >= PARALLEL_THRESHOLD)
+
+    def use_threads(self, on: bool) -> None:
+        """Step the physics and the task on all cores (or on one); the numbers are the same."""
+        self.lanes.parallel = on
+        self.post = self.task.post_parallel if on else self.task.post
 
     # ------------------------------------------------------------ episodes
     def set_rngs(self, rngs: Sequence[np.random.Generator], reseeded: bool = True) -> None:

@@ -115,41 +115,60 @@ def reference(t: float, p: np.ndarray) -> tuple[float, float]:
             p[2] * 30.0 * s * s * (1.0 - s) * (1.0 - s) / p[4])
 
 
+@nb.njit(cache=True, inline="always")
+def _track_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+               act: np.ndarray, tp: np.ndarray, steps: np.ndarray, fresh: np.ndarray,
+               dt: float, c: np.ndarray, obs: np.ndarray, rew: np.ndarray, term: np.ndarray,
+               aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of tracking env ``i``."""
+    ratio = c[C_RATIO]
+    rs = c[J_REF]
+    ws = c[C_WNOM]
+    wo = ws / ratio
+    x = xs[i]
+    t = steps[i] * dt
+    r, rd = reference(t, tp[i])
+    th_m = meas[0, i]
+    th_o = meas[1, i]
+    o = obs[i]
+    o[0] = _box(th_o / rs)
+    o[1] = _box(th_m / ratio / rs)
+    o[2] = _box(math.cos(th_m))
+    o[3] = _box(math.sin(th_m))
+    o[4] = _box(meas[2, i] / ws)
+    o[5] = _box(meas[3, i] / wo)
+    o[6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
+    o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
+    o[8] = _box(r / rs)
+    o[9] = _box(rd / wo)
+    o[10] = _box((r - th_o) / c[J_ERR])
+    o[11] = _box(act[i])
+    e = r - x[TH_O]
+    cur = x[CUR] / c[C_IMAX]
+    reward = 1.0 / (1.0 + abs(e) / c[J_ERR]) - c[J_WCUR] * min(cur * cur, 4.0)
+    rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
+    aux[i, 0] = r
+    aux[i, 1] = e if math.isfinite(e) else 0.0
+
+
 @nb.njit(cache=True)
 def post_tracking(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
                   act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
                   fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                   rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
     """Observation, reward and safety termination of the tracking task (batch)."""
-    ratio = c[C_RATIO]
-    rs = c[J_REF]
-    ws = c[C_WNOM]
-    wo = ws / ratio
     for i in range(xs.shape[0]):
-        x = xs[i]
-        t = steps[i] * dt
-        r, rd = reference(t, tp[i])
-        th_m = meas[0, i]
-        th_o = meas[1, i]
-        o = obs[i]
-        o[0] = _box(th_o / rs)
-        o[1] = _box(th_m / ratio / rs)
-        o[2] = _box(math.cos(th_m))
-        o[3] = _box(math.sin(th_m))
-        o[4] = _box(meas[2, i] / ws)
-        o[5] = _box(meas[3, i] / wo)
-        o[6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
-        o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
-        o[8] = _box(r / rs)
-        o[9] = _box(rd / wo)
-        o[10] = _box((r - th_o) / c[J_ERR])
-        o[11] = _box(act[i])
-        e = r - x[TH_O]
-        cur = x[CUR] / c[C_IMAX]
-        reward = 1.0 / (1.0 + abs(e) / c[J_ERR]) - c[J_WCUR] * min(cur * cur, 4.0)
-        rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
-        aux[i, 0] = r
-        aux[i, 1] = e if math.isfinite(e) else 0.0
+        _track_env(i, xs, bad, meas, z, act, tp, steps, fresh, dt, c, obs, rew, term, aux)
+
+
+@nb.njit(cache=True, parallel=True)
+def post_tracking_parallel(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+                           act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
+                           fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
+                           rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """:func:`post_tracking` with the envs spread over the cores (same numbers)."""
+    for i in nb.prange(xs.shape[0]):
+        _track_env(i, xs, bad, meas, z, act, tp, steps, fresh, dt, c, obs, rew, term, aux)
 
 
 class TrackingTask:
@@ -177,6 +196,7 @@ class TrackingTask:
     n_params = N_JOINT_PARAMS
     n_state = 1
     post = staticmethod(post_tracking)
+    post_parallel = staticmethod(post_tracking_parallel)
 
     def __init__(self, reference: str | Sequence[str] = "mixed", reference_scale: float = 0.5,
                  error_scale: float = 1e-3, current_weight: float = 0.05,
@@ -238,48 +258,69 @@ R_TAU = C_TASK + 1  # time constant of the torque mean, s
 N_RES_CONST = C_TASK + 2
 
 
-@nb.njit(cache=True)
-def post_resonance(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+@nb.njit(cache=True, inline="always")
+def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
                    act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
                    fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                    rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
-    """Observation, reward and safety termination of the resonance task (batch).
+    """Observation, reward and safety termination of resonance env ``i``.
 
-    ``ts[:, 0]`` and ``ts[:, 1]`` hold the running means (first-order,
+    ``ts[i, 0]`` and ``ts[i, 1]`` hold the running means (first-order,
     time constant ``c[R_TAU]``) of the true and measured flexspline torque;
     the oscillation is the torque minus its mean.
     """
     beta = dt / (c[R_TAU] + dt)
     tn = c[C_TNOM]
+    x = xs[i]
+    wt = tp[i, 0]
+    t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
+    t_true = x[TK]
+    if fresh[i] or not math.isfinite(ts[i, 0]):
+        ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
+        ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
+    else:
+        ts[i, 0] += beta * (t_true - ts[i, 0])
+        ts[i, 1] += beta * (t_meas - ts[i, 1])
+    th_m = meas[0, i]
+    o = obs[i]
+    o[0] = _box(meas[2, i] / wt)
+    o[1] = _box(meas[3, i] * c[C_RATIO] / wt)
+    o[2] = _box(math.cos(th_m))
+    o[3] = _box(math.sin(th_m))
+    o[4] = _box(t_meas / tn)
+    o[5] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
+    o[6] = _box(wt / c[C_WNOM])
+    o[7] = _box((t_meas - ts[i, 1]) / tn)
+    o[8] = _box(act[i])
+    o[9] = _box(steps[i] * dt / c[C_HOR])
+    speed_err = min(abs(wt - x[W_M]) / wt, 2.0)
+    osc = (t_true - ts[i, 0]) / tn
+    reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
+    rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
+    aux[i, 0] = wt
+    aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
+
+
+@nb.njit(cache=True)
+def post_resonance(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+                   act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
+                   fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
+                   rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of the resonance task (batch)."""
     for i in range(xs.shape[0]):
-        x = xs[i]
-        wt = tp[i, 0]
-        t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
-        t_true = x[TK]
-        if fresh[i] or not math.isfinite(ts[i, 0]):
-            ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
-            ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
-        else:
-            ts[i, 0] += beta * (t_true - ts[i, 0])
-            ts[i, 1] += beta * (t_meas - ts[i, 1])
-        th_m = meas[0, i]
-        o = obs[i]
-        o[0] = _box(meas[2, i] / wt)
-        o[1] = _box(meas[3, i] * c[C_RATIO] / wt)
-        o[2] = _box(math.cos(th_m))
-        o[3] = _box(math.sin(th_m))
-        o[4] = _box(t_meas / tn)
-        o[5] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
-        o[6] = _box(wt / c[C_WNOM])
-        o[7] = _box((t_meas - ts[i, 1]) / tn)
-        o[8] = _box(act[i])
-        o[9] = _box(steps[i] * dt / c[C_HOR])
-        speed_err = min(abs(wt - x[W_M]) / wt, 2.0)
-        osc = (t_true - ts[i, 0]) / tn
-        reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
-        rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
-        aux[i, 0] = wt
-        aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
+        _resonance_env(i, xs, bad, meas, z, act, tp, ts, steps, fresh, dt, c, obs, rew, term,
+                       aux)
+
+
+@nb.njit(cache=True, parallel=True)
+def post_resonance_parallel(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
+                            act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
+                            fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
+                            rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """:func:`post_resonance` with the envs spread over the cores (same numbers)."""
+    for i in nb.prange(xs.shape[0]):
+        _resonance_env(i, xs, bad, meas, z, act, tp, ts, steps, fresh, dt, c, obs, rew, term,
+                       aux)
 
 
 class ResonanceTask:
@@ -302,6 +343,7 @@ class ResonanceTask:
     n_params = 1
     n_state = 2
     post = staticmethod(post_resonance)
+    post_parallel = staticmethod(post_resonance_parallel)
 
     def __init__(self, target_speed: float | tuple[float, float] = (
             math.radians(10_000.0), math.radians(12_000.0)),

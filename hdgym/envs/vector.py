@@ -69,7 +69,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.batch = JointBatch(task, self.num_envs, **kwargs)
         if parallel is not None:
-            self.batch.lanes.parallel = bool(parallel)
+            self.batch.use_threads(bool(parallel))
         self.task = task
         self.params = self.batch.params
         self.max_episode_steps = max_episode_steps
@@ -85,10 +85,10 @@ class HarmonicDriveVectorEnv(VectorEnv):
 
     def _info(self) -> dict[str, Any]:
         b = self.batch
-        s = b.true_states()
+        s = np.ascontiguousarray(b.true_states().T)  # one fresh copy; its rows are handed out
         info: dict[str, Any] = {}
         for k, name in enumerate(INFO_STATES):
-            info[name] = s[:, k].copy()
+            info[name] = s[k]
         info["time"] = b.steps * b.ctrl_dt
         info[self.task.aux_names[0]] = b.aux[:, 0].copy()
         info[self.task.aux_names[1]] = b.aux[:, 1].copy()

@@ -1,29 +1,30 @@
-"""The compiled joint step laid out for SIMD: many envs, one lane each.
+"""The compiled joint step laid out for SIMD: many envs, one vector lane each.
 
 :mod:`hdgym.physics.kernel` steps one env at a time; each substep there is
-one long chain of dependent operations, so a core spends most of its time
-waiting on latencies. Here the state is held column-wise (``S[field, env]``)
-and every substep is a handful of passes over a block of envs, each pass a
-branch-free loop the compiler turns into vector instructions (4 or 8 envs
-per instruction). The physics is the same semi-implicit step, operation for
-operation (see the kernel's docstring); the tests hold the two together.
+one long chain of dependent operations, so a core mostly waits on
+latencies. Here envs are grouped in blocks of :data:`BLOCK`, and every
+substep is a handful of passes over a block, each pass a branch-free loop
+over its envs that the compiler turns into vector instructions (8 envs per
+instruction with AVX-512, 4 with AVX2). The physics is the kernel's
+semi-implicit step, operation for operation; the tests hold both to the
+numpy reference (:mod:`hdgym.physics.reference`). The one-env kernel stays
+for single trajectories, where a block would run 63 spare lanes.
 
-Three arrays per batch, owned by the caller and reused every call:
+A block is one flat float64 buffer of :data:`N_FIELDS` fields per env: the
+state (layout of :mod:`hdgym.physics.layout`), constants derived once from
+the parameter row, the effect flags and the substep (reciprocals, limits;
+effects that are off become zero amplitudes or infinite limits, so every
+lane runs the same instructions), sin and cos of the kinematic-error,
+friction-ripple and gravity phases, and the substep's temporaries. The
+phases are rotated by each substep's angle increment (a Taylor series; exact
+sin/cos for increments of 0.3 rad and more) and recomputed exactly every
+:data:`RESYNC` substeps.
 
-* ``S (N_STATE, n)``: the state (layout of :mod:`hdgym.physics.layout`,
-  transposed). A ``(n, N_STATE)`` view of it is ``S.T``.
-* ``K (N_K, n)``: per-env constants derived from the parameter row, the
-  effect flags and the substep by :func:`prepare` (call it again for an env
-  whose parameters, flags or substep change).
-* ``T (N_T, n)``: sin and cos of the kinematic-error, friction-ripple and
-  gravity phases, rotated by each substep's angle increment (a short Taylor
-  series) and recomputed exactly by :func:`sync_phases` every
-  :data:`RESYNC` substeps and whenever the caller moves the angles.
-
-Effects that are off, harmonics an env does not have, and the amplifier
-limits when saturation is off are encoded as zero amplitudes and infinite
-limits in ``K``, so every env in a block runs the same instructions.
+:class:`LaneBatch` owns the buffers and mirrors the state into the caller's
+``(n, N_STATE)`` rows after every step; after writing rows (a reset), call
+:meth:`LaneBatch.load`.
 """
+
 
 from __future__ import annotations
 
@@ -602,16 +603,6 @@ def _load(W: np.ndarray, xs: np.ndarray, ps: np.ndarray, flags: np.ndarray, dt: 
 
 
 @_jit
-def _put_state(W: np.ndarray, xs: np.ndarray, idx: np.ndarray) -> None:
-    for e in idx:
-        w = W[e // BLOCK]
-        j = e % BLOCK
-        for f in range(L.N_STATE):
-            _s(w, f, j, xs[e, f])
-        _sync_lane(w, j)
-
-
-@_jit
 def _step_block(W: np.ndarray, b: int, i_cmd: np.ndarray, t_ext: np.ndarray, n_sub: int,
                 xs: np.ndarray, bad: np.ndarray) -> None:
     """Block ``b``: take its inputs, run it, and copy its state out to ``xs`` rows."""
@@ -667,21 +658,15 @@ class LaneBatch:
         # spare lanes of the last block run a copy of env 0 and are never read
         self.W = np.zeros((n_blocks, N_FIELDS * BLOCK))
         self.parallel = parallel
-        pad = np.arange(n_blocks * BLOCK) % self.n
-        self._pad_rows = (xs[pad], ps[pad], flags[pad])
         self.load(xs, ps, flags, np.arange(self.n))
         if n_blocks * BLOCK > self.n:
-            spare = np.arange(self.n, n_blocks * BLOCK)
-            _load(self.W, self._pad_rows[0], self._pad_rows[1], self._pad_rows[2], self.dt,
-                  spare)
+            pad = np.arange(n_blocks * BLOCK) % self.n
+            _load(self.W, xs[pad], ps[pad], flags[pad], self.dt,
+                  np.arange(self.n, n_blocks * BLOCK))
 
     def load(self, xs: np.ndarray, ps: np.ndarray, flags: np.ndarray, idx: np.ndarray) -> None:
         """Take state, parameters and flags of envs ``idx`` (after a reset or a change)."""
         _load(self.W, xs, ps, flags, self.dt, np.asarray(idx, dtype=np.int64))
-
-    def put_state(self, xs: np.ndarray, idx: np.ndarray) -> None:
-        """Take the state of envs ``idx`` (parameters unchanged)."""
-        _put_state(self.W, xs, np.asarray(idx, dtype=np.int64))
 
     def step(self, i_cmd: np.ndarray, t_ext: np.ndarray, n_sub: int, xs: np.ndarray,
              bad: np.ndarray) -> None:
