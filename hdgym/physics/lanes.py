@@ -50,7 +50,8 @@ AMP = BIT["amplifier_saturation"]
 LOCKED = LOCKED_OUTPUT_BIT
 
 # error_model="numpy": a division by zero in a lane whose result is discarded
-# must not raise (it would also stop the loop from vectorizing)
+# must not raise (it would also stop the loop from vectorizing). The passes are
+# inlined into the block loop: a call per pass would cost reference counting.
 _jit = nb.njit(cache=True, fastmath={"contract"}, nogil=True, error_model="numpy")
 _inl = nb.njit(cache=True, fastmath={"contract"}, nogil=True, error_model="numpy",
                inline="always")
@@ -283,21 +284,21 @@ def _sincos_small(d: float) -> tuple[float, float]:
     return sd, cd
 
 
-@_jit
-def _rotate(w: np.ndarray, ph: int) -> None:
+@_inl
+def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
     """Rotate phase ``ph`` of every lane by its increment in field T_D."""
     big = 0
-    for j in range(BLOCK):
+    for j in range(nl):
         big += 1 if abs(_g(w, T_D, j)) >= 0.3 else 0
     if big == 0:  # the usual case: a vector loop over the Taylor series
-        for j in range(BLOCK):
+        for j in range(nl):
             sd, cd = _sincos_small(_g(w, T_D, j))
             s = _g(w, SIN + ph, j)
             c = _g(w, COS + ph, j)
             _s(w, SIN + ph, j, s * cd + c * sd)
             _s(w, COS + ph, j, c * cd - s * sd)
         return
-    for j in range(BLOCK):  # coarse substeps or very fast motors
+    for j in range(nl):  # coarse substeps or very fast motors
         d = _g(w, T_D, j)
         if abs(d) < 0.3:
             sd, cd = _sincos_small(d)
@@ -354,19 +355,19 @@ def _visc(w: np.ndarray, at: int, j: int, v: float) -> float:
     return below if v2 <= _g(w, at + F_PK2, j) else capped
 
 
-@_jit
-def _block_max(w: np.ndarray, f: int) -> int:
+@_inl
+def _block_max(w: np.ndarray, nl: int, f: int) -> int:
     m = 0.0
-    for j in range(BLOCK):
+    for j in range(nl):
         m = max(m, _g(w, f, j))
     return int(m)
 
 
-@_jit
-def _tanh_hysteresis(w: np.ndarray) -> None:
+@_inl
+def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
     """The tanh hysteresis model for the lanes that use it (scalar: it needs tanh)."""
     hz = L.HZ
-    for j in range(BLOCK):
+    for j in range(nl):
         if _g(w, TANH, j) == 0.0:
             continue
         dth = _g(w, T_DTH, j)
@@ -386,10 +387,10 @@ def _tanh_hysteresis(w: np.ndarray) -> None:
         _s(w, T_TH, j, t_h)
 
 
-@_jit
-def _stribeck(w: np.ndarray) -> None:
+@_inl
+def _stribeck(w: np.ndarray, nl: int) -> None:
     """Stribeck level where it is not negligible (scalar: it needs exp)."""
-    for j in range(BLOCK):
+    for j in range(nl):
         for side in range(2):
             at = SIDE[side]
             if _g(w, at + F_STRIB, j) == 0.0:
@@ -405,16 +406,16 @@ def _stribeck(w: np.ndarray) -> None:
                    fc + (_g(w, at + F_FS, j) - fc) * math.exp(-r2))
 
 
-@_jit
-def _torsion(w: np.ndarray, nke: int) -> None:
-    for j in range(BLOCK):
+@_inl
+def _torsion(w: np.ndarray, nl: int, nke: int) -> None:
+    for j in range(nl):
         _s(w, T_KE, j, 0.0)
         _s(w, T_DKE, j, 0.0)
     for k in range(nke):
-        for j in range(BLOCK):
+        for j in range(nl):
             _s(w, T_KE, j, _g(w, T_KE, j) + _g(w, KE_A + k, j) * _g(w, SIN + P_KE + k, j))
             _s(w, T_DKE, j, _g(w, T_DKE, j) + _g(w, KE_AO + k, j) * _g(w, COS + P_KE + k, j))
-    for j in range(BLOCK):
+    for j in range(nl):
         inv_r = _g(w, INV_R, j)
         dth = _g(w, L.TH_M, j) * inv_r - _g(w, L.TH_O, j) - _g(w, T_KE, j)
         gear = inv_r - _g(w, T_DKE, j)
@@ -427,11 +428,11 @@ def _torsion(w: np.ndarray, nke: int) -> None:
         _s(w, T_DISS, j, 0.0)
 
 
-@_jit
-def _maxwell(w: np.ndarray, nslip: int) -> None:
+@_inl
+def _maxwell(w: np.ndarray, nl: int, nslip: int) -> None:
     for k in range(nslip):
         hz = L.HZ + k
-        for j in range(BLOCK):
+        for j in range(nl):
             kap = _g(w, SLIP_K + k, j)
             wk = _g(w, SLIP_W + k, j)
             f0 = _g(w, hz, j)
@@ -447,12 +448,12 @@ def _maxwell(w: np.ndarray, nslip: int) -> None:
             _s(w, T_DISS, j, _g(w, T_DISS, j) + (dd if on else 0.0))
 
 
-@_jit
-def _drive(w: np.ndarray) -> None:
+@_inl
+def _drive(w: np.ndarray, nl: int) -> None:
     """Transmitted torque, amplifier and current loop, Coulomb levels."""
     a_in = SIDE[0]
     a_out = SIDE[1]
-    for j in range(BLOCK):
+    for j in range(nl):
         t_k = _spring(w, j, _g(w, T_DTH, j)) + _g(w, CDAMP, j) * _g(w, T_DDTH, j) \
             + _g(w, T_TH, j)
         _s(w, T_TK, j, t_k)
@@ -481,21 +482,21 @@ def _drive(w: np.ndarray) -> None:
         _s(w, T_LOUT, j, stuck_out if _g(w, L.W_O, j) == 0.0 else fc_out)
 
 
-@_jit
-def _ripples(w: np.ndarray, side: int, nrip: int) -> None:
+@_inl
+def _ripples(w: np.ndarray, nl: int, side: int, nrip: int) -> None:
     at = SIDE[side] + F_RA
     lvl = T_LIN if side == 0 else T_LOUT
     for k in range(nrip):
-        for j in range(BLOCK):
+        for j in range(nl):
             _s(w, lvl, j, _g(w, lvl, j) + _g(w, at + k, j) * _g(w, SIN + P_RIP[side] + k, j))
 
 
-@_jit
-def _move(w: np.ndarray) -> None:
+@_inl
+def _move(w: np.ndarray, nl: int) -> None:
     """Speeds (friction, viscous), angles and energy bookkeeping."""
     a_in = SIDE[0]
     a_out = SIDE[1]
-    for j in range(BLOCK):
+    for j in range(nl):
         dt = _g(w, DT, j)
         t_k = _g(w, T_TK, j)
         t_m = _g(w, T_TM, j)
@@ -529,26 +530,26 @@ def _move(w: np.ndarray) -> None:
         _s(w, L.W_LOAD, j, _g(w, L.W_LOAD, j) - dt * t_load * w_o_new)
 
 
-@_jit
-def _phases(w: np.ndarray, nke: int, nrin: int, nrout: int, grav: bool) -> None:
+@_inl
+def _phases(w: np.ndarray, nl: int, nke: int, nrin: int, nrout: int, grav: bool) -> None:
     """Rotate every phase by its angle's increment over the substep."""
     for k in range(nke):
-        for j in range(BLOCK):
+        for j in range(nl):
             _s(w, T_D, j, _g(w, KE_O + k, j) * _g(w, T_DM, j))
-        _rotate(w, P_KE + k)
+        _rotate(w, nl, P_KE + k)
     for side in range(2):
         at = SIDE[side]
         for k in range(nrin if side == 0 else nrout):
-            for j in range(BLOCK):
+            for j in range(nl):
                 d_o = _g(w, T_DO, j)
                 d_m = _g(w, T_DM, j)
                 inc = d_o if _g(w, at + F_RF + k, j) != 0.0 else d_m
                 _s(w, T_D, j, _g(w, at + F_RO + k, j) * inc)
-            _rotate(w, P_RIP[side] + k)
+            _rotate(w, nl, P_RIP[side] + k)
     if grav:
-        for j in range(BLOCK):
+        for j in range(nl):
             _s(w, T_D, j, _g(w, T_DO, j))
-        _rotate(w, P_GRAV)
+        _rotate(w, nl, P_GRAV)
 
 
 @_jit
@@ -560,31 +561,33 @@ def _bad_lane(w: np.ndarray, j: int) -> bool:
 
 
 @_jit
-def run_block(w: np.ndarray, n_sub: int) -> None:
-    """``n_sub`` substeps for the BLOCK envs of block buffer ``w``."""
-    for j in range(BLOCK):
+def run_block(w: np.ndarray, nl: int, n_sub: int) -> None:
+    """``n_sub`` substeps for the first ``nl`` lanes of block buffer ``w``."""
+    # nl <= BLOCK, stated so the compiler can prove the fields never overlap
+    nl = min(nl, BLOCK)
+    for j in range(nl):
         if _g(w, COUNT, j) >= RESYNC:
             _sync_lane(w, j)
-    nke = _block_max(w, NKE)
-    nslip = _block_max(w, NSLIP)
-    nrin = _block_max(w, NRIP_IN)
-    nrout = _block_max(w, NRIP_OUT)
-    any_tanh = _block_max(w, TANH) > 0
+    nke = _block_max(w, nl, NKE)
+    nslip = _block_max(w, nl, NSLIP)
+    nrin = _block_max(w, nl, NRIP_IN)
+    nrout = _block_max(w, nl, NRIP_OUT)
+    any_tanh = _block_max(w, nl, TANH) > 0
     grav = False
-    for j in range(BLOCK):
+    for j in range(nl):
         grav = grav or _g(w, GRAV, j) != 0.0
     for _ in range(n_sub):
-        _torsion(w, nke)
-        _maxwell(w, nslip)
+        _torsion(w, nl, nke)
+        _maxwell(w, nl, nslip)
         if any_tanh:
-            _tanh_hysteresis(w)
-        _drive(w)
-        _stribeck(w)
-        _ripples(w, 0, nrin)
-        _ripples(w, 1, nrout)
-        _move(w)
-        _phases(w, nke, nrin, nrout, grav)
-    for j in range(BLOCK):
+            _tanh_hysteresis(w, nl)
+        _drive(w, nl)
+        _stribeck(w, nl)
+        _ripples(w, nl, 0, nrin)
+        _ripples(w, nl, 1, nrout)
+        _move(w, nl)
+        _phases(w, nl, nke, nrin, nrout, grav)
+    for j in range(nl):
         _s(w, COUNT, j, _g(w, COUNT, j) + n_sub)
         _s(w, BAD, j, 1.0 if _bad_lane(w, j) else 0.0)
 
@@ -612,7 +615,7 @@ def _step_block(W: np.ndarray, b: int, i_cmd: np.ndarray, t_ext: np.ndarray, n_s
     for e in range(lo, hi):
         _s(w, ICMD, e - lo, i_cmd[e])
         _s(w, TEXT, e - lo, t_ext[e])
-    run_block(w, n_sub)
+    run_block(w, hi - lo, n_sub)
     for e in range(lo, hi):
         j = e - lo
         for f in range(L.N_STATE):
@@ -655,14 +658,10 @@ class LaneBatch:
         self.n = xs.shape[0]
         self.dt = float(dt)
         n_blocks = (self.n + BLOCK - 1) // BLOCK
-        # spare lanes of the last block run a copy of env 0 and are never read
+        # the last block's spare lanes are never computed
         self.W = np.zeros((n_blocks, N_FIELDS * BLOCK))
         self.parallel = parallel
         self.load(xs, ps, flags, np.arange(self.n))
-        if n_blocks * BLOCK > self.n:
-            pad = np.arange(n_blocks * BLOCK) % self.n
-            _load(self.W, xs[pad], ps[pad], flags[pad], self.dt,
-                  np.arange(self.n, n_blocks * BLOCK))
 
     def load(self, xs: np.ndarray, ps: np.ndarray, flags: np.ndarray, idx: np.ndarray) -> None:
         """Take state, parameters and flags of envs ``idx`` (after a reset or a change)."""
