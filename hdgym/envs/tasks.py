@@ -121,31 +121,34 @@ def _track_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.
                dt: float, c: np.ndarray, obs: np.ndarray, rew: np.ndarray, term: np.ndarray,
                aux: np.ndarray) -> None:
     """Observation, reward and safety termination of tracking env ``i``."""
-    ratio = c[C_RATIO]
-    rs = c[J_REF]
-    ws = c[C_WNOM]
-    wo = ws / ratio
+    # scales as reciprocals: one division per env instead of a dozen
+    inv_rs = 1.0 / c[J_REF]
+    inv_ratio = 1.0 / c[C_RATIO]
+    inv_ws = 1.0 / c[C_WNOM]
+    inv_wo = c[C_RATIO] * inv_ws
+    inv_imax = 1.0 / c[C_IMAX]
+    inv_err = 1.0 / c[J_ERR]
     x = xs[i]
     t = steps[i] * dt
     r, rd = reference(t, tp[i])
     th_m = meas[0, i]
     th_o = meas[1, i]
     o = obs[i]
-    o[0] = _box(th_o / rs)
-    o[1] = _box(th_m / ratio / rs)
+    o[0] = _box(th_o * inv_rs)
+    o[1] = _box(th_m * inv_ratio * inv_rs)
     o[2] = _box(math.cos(th_m))
     o[3] = _box(math.sin(th_m))
-    o[4] = _box(meas[2, i] / ws)
-    o[5] = _box(meas[3, i] / wo)
+    o[4] = _box(meas[2, i] * inv_ws)
+    o[5] = _box(meas[3, i] * inv_wo)
     o[6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
-    o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
-    o[8] = _box(r / rs)
-    o[9] = _box(rd / wo)
-    o[10] = _box((r - th_o) / c[J_ERR])
+    o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) * inv_imax)
+    o[8] = _box(r * inv_rs)
+    o[9] = _box(rd * inv_wo)
+    o[10] = _box((r - th_o) * inv_err)
     o[11] = _box(act[i])
     e = r - x[TH_O]
-    cur = x[CUR] / c[C_IMAX]
-    reward = 1.0 / (1.0 + abs(e) / c[J_ERR]) - c[J_WCUR] * min(cur * cur, 4.0)
+    cur = x[CUR] * inv_imax
+    reward = 1.0 / (1.0 + abs(e) * inv_err) - c[J_WCUR] * min(cur * cur, 4.0)
     rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
     aux[i, 0] = r
     aux[i, 1] = e if math.isfinite(e) else 0.0
