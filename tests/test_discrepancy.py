@@ -20,7 +20,7 @@ from hdgym.sim import Simulator
 REAL = realdata.DATA
 SCALES = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=2.0, current_measured=2.0,
                 voltage=20.0, transmission_error=1e-4,
-                ke=((2.0, 2e-4, 1e-4),), ripple=((1.0, 0.1, 0.0),))
+                ke=((2.0, "circular_spline", 2e-4, 1e-4),), ripple=((1.0, 0.1, 0.0),))
 
 
 # ---------------------------------------------------------------- registry
@@ -122,7 +122,8 @@ FAST_DURATION = 2.0
 
 
 def _run(case: cases.Case, duration: float = FAST_DURATION) -> cases.CaseResult:
-    return cases.run_case(cases.Case(case.name, case.hidden, case.protocol, duration), quick=True)
+    return cases.run_case(cases.Case(case.name, case.hidden, case.protocol, duration,
+                                     case.drive), quick=True)
 
 
 @pytest.mark.parametrize("name", EFFECTS)
@@ -211,6 +212,47 @@ def test_pattern_search_follows_a_staircase_cost():
 
     z, n = _pattern_search(cost, np.array([1.0, 2.0]), 200)
     assert np.allclose(z, target, atol=0.01) and n <= 200
+
+
+def test_ke_lines_follow_the_simulator_split():
+    from hdgym.discrepancy.registry import ke_lines
+    from hdgym.params import preset
+
+    p = preset("tuttle-joint1")  # flexspline grounded: circular-spline lines at n (1 - 1/161)
+    lines = ke_lines(p, 2 * np.pi * 15)
+    got = {(o, port): eff for o, port, eff in lines}
+    assert got[(2.0, "flexspline")] == 2.0
+    assert got[(2.0, "circular_spline")] == pytest.approx(2 * (1 - 1 / 161))
+    assert got[(4.0, "circular_spline")] == pytest.approx(4 * (1 - 1 / 161))
+    # every line of the preset is one the registry can fit
+    for h in p.kinematic_error.harmonics:
+        assert (h.order, h.port) in got
+    # a record too short to tell the two splines apart gets the grounded lines only
+    assert {port for _, port, _ in ke_lines(p, 2 * np.pi * 2)} == {"flexspline"}
+
+
+def test_ke_guess_reads_the_split_lines_of_tuttle_joint1():
+    from hdgym.discrepancy.fitting import Problem
+
+    case = cases.Case("ke", ("kinematic_error",), "slow_constant_speed", 2.0,
+                      drive="tuttle-joint1")
+    truth = cases.truth_for(case)
+    train, _ = cases.records(case, truth, 2.0)
+    guess = {(o, port): math.hypot(a, b)
+             for o, port, a, b in Problem(train, cases.base_for(case, truth)).scales.ke}
+    for h in truth.kinematic_error.harmonics:
+        assert guess[(h.order, h.port)] == pytest.approx(h.amplitude, rel=0.2), h
+
+
+def test_kinematic_error_on_tuttle_joint1_split_lines():
+    case = cases.Case("kinematic_error (tuttle-joint1)", ("kinematic_error",),
+                      "slow_constant_speed", drive="tuttle-joint1")
+    r = _run(case)
+    d = r.diagnosis
+    assert r.found and r.found[0] == "kinematic_error", (r.found, d.conclusion)
+    assert d.nmse_after <= 0.2 * d.nmse_before, (d.nmse_before, d.nmse_after)
+    ports = {h.port for h in d.after.params.kinematic_error.harmonics}
+    assert ports == {"flexspline", "circular_spline"}
 
 
 def test_nothing_hidden_reports_nothing():

@@ -331,14 +331,18 @@ class Problem:
         return tuple((float(n), float(beta[2 + 2 * k]), float(beta[3 + 2 * k]))
                      for k, n in enumerate(orders))
 
-    def _ke_guess(self) -> tuple[tuple[float, float, float], ...]:
-        from .registry import KE_ORDERS
+    def _ke_guess(self) -> tuple[tuple[float, str, float, float], ...]:
+        from .registry import ke_lines
 
-        if "transmission_error" not in self.measured or np.ptp(self.context.theta_m) < 4 * np.pi:
+        span = float(np.ptp(self.context.theta_m))
+        if "transmission_error" not in self.measured or span < 4 * np.pi:
             return ()
+        lines = ke_lines(self.params, span)
+        fit = self._harmonics(self.measured["transmission_error"],
+                              tuple(eff for _, _, eff in lines))
         # TE = output - motor/ratio = -(ke + torsion): the KE is minus the order lines
-        return tuple((n, -a, -b) for n, a, b in
-                     self._harmonics(self.measured["transmission_error"], KE_ORDERS))
+        return tuple((o, port, -a, -b)
+                     for (o, port, _), (_, a, b) in zip(lines, fit, strict=True))
 
     def _ripple_guess(self) -> tuple[tuple[float, float, float], ...]:
         from .registry import RIPPLE_ORDERS

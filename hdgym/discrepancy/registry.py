@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hdgym.effects import EFFECTS
-from hdgym.params import JointParams, from_dict, to_dict
+from hdgym.params import GROUNDED, JointParams, from_dict, to_dict
 
 _TOKEN = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
@@ -152,9 +152,10 @@ class Scales:
         inverse: torque-domain (inverse-dynamics) comparison; the compliance,
             hysteresis, kinematic-error and amplifier effects are not testable.
         transmission_error: typical size of output - motor/ratio, output rad.
-        ke: ``(order, a, b)`` guesses of kinematic-error harmonics
-            ``a sin + b cos`` (output rad), regressed from the measured
-            transmission error.
+        ke: ``(order, port, a, b)`` guesses of kinematic-error lines
+            ``a sin + b cos`` (output rad; ``order`` relative to ``port``, as in
+            :class:`hdgym.params.Harmonic`), regressed from the measured
+            transmission error at the lines :func:`ke_lines` says the record resolves.
         ripple: ``(order, a, b)`` guesses of output-side friction ripple (N m),
             regressed from the measured acceleration while moving.
         static: ``(side, static, running)`` friction levels read from the record's
@@ -172,7 +173,7 @@ class Scales:
     locked: bool = False
     inverse: bool = False
     transmission_error: float = 0.0
-    ke: tuple[tuple[float, float, float], ...] = ()
+    ke: tuple[tuple[float, str, float, float], ...] = ()
     ripple: tuple[tuple[float, float, float], ...] = ()
     static: tuple[tuple[str, float, float], ...] = ()
 
@@ -253,6 +254,11 @@ def _assign(d: dict[str, Any], path: str, value: Any) -> None:
 # ------------------------------------------------------------------- effects
 
 KE_ORDERS = (1.0, 2.0, 4.0)
+"""Orders of the kinematic-error lines, per WG revolution relative to the spline whose tooth
+errors make them (PHYSICS.md 2.1: 2 dominant, then 4, sometimes 1)."""
+KE_SPLIT = 0.5
+"""Least phase, rad, by which the other spline's line must drift against the grounded one's
+over a record for the two to be fitted apart (:func:`ke_lines`)."""
 RIPPLE_ORDERS = (1.0, 2.0)
 N_SLIP = 3
 
@@ -282,6 +288,31 @@ def _w_side(p: JointParams, s: Scales, side: str) -> float:
     return s.speed if side == "output" else s.speed * p.ratio
 
 
+def ke_lines(p: JointParams, span: float) -> list[tuple[float, str, float]]:
+    """Kinematic-error lines a record spanning ``span`` rad of WG angle can fit.
+
+    Each order of :data:`KE_ORDERS` has two lines, as the simulator defines them
+    (:meth:`hdgym.params.Transmission.port_factor`): the grounded spline's tooth
+    errors at exactly that order of the WG angle, the other spline's at
+    ``order x (1 -+ 1/ratio)`` (Tuttle's split lines; their beat has a period of
+    about ratio / order WG turns). The other spline's line is kept only when it
+    drifts at least :data:`KE_SPLIT` rad against the grounded one over the record;
+    otherwise the grounded line alone stands for both.
+
+    Returns:
+        ``(order, port, effective order)`` per line.
+    """
+    tr = p.transmission
+    other = next(g for g in GROUNDED if g != tr.grounded)
+    out = []
+    for o in KE_ORDERS:
+        out.append((o, tr.grounded, o))
+        eff = o * tr.port_factor(other)
+        if abs(eff - o) * span >= KE_SPLIT:
+            out.append((o, other, eff))
+    return out
+
+
 def _ke_params(p, s):
     a = max(3.0 * s.transmission_error, 1e-5)
     return [FitParam(f"kinematic_error.harmonics[{k}].{c}", -a, a)
@@ -296,10 +327,9 @@ def _harmonic_guess(guess, order: float) -> tuple[float, float]:
 
 
 def _ke_on(p, s):
-    out = []
-    for o in KE_ORDERS:
-        amp, ph = _harmonic_guess(s.ke, o)
-        out.append({"order": o, "amplitude": amp, "phase": ph, "port": p.transmission.grounded})
+    lines = s.ke or tuple((o, p.transmission.grounded, 0.0, 0.0) for o in KE_ORDERS)
+    out = [{"order": o, "amplitude": math.hypot(a, b), "phase": math.atan2(b, a), "port": port}
+           for o, port, a, b in lines]
     return {"@kinematic_error.harmonics": out}
 
 

@@ -441,6 +441,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
             values[item + ".amplitude"] = get_value(polished.params, item + ".amplitude")
             values[item + ".phase"] = get_value(polished.params, item + ".phase")
             values[item + ".order"] = get_value(polished.params, item + ".order")
+            if item.startswith("kinematic_error."):  # the line's order of the WG angle
+                h = polished.params.kinematic_error.harmonics[int(item.split("[")[1][:-1])]
+                values[item + ".wg_order"] = (
+                    h.order * polished.params.transmission.port_factor(h.port))
         evidence = {"signature": best["signature"], "detail": best["detail"],
                     "signature_explained": best["signature_explained"],
                     "sensitivity_explained": best["sensitivity_explained"],
