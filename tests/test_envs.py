@@ -225,6 +225,75 @@ def test_vector_equals_single_envs(env_id, kw, parallel):
     assert resets >= n * 2
 
 
+@pytest.mark.parametrize("env_id,kw", [
+    (IDS[0], {"sensors": NOISY, "randomize": RAND}),
+    (IDS[1], {"sensors": NOISY, "randomize": RAND, "torque_limit": 40.0}),
+])
+def test_vector_same_step_autoreset_equals_single_envs(env_id, kw):
+    """SAME_STEP: an env that ends is reset within the step; its last observation goes
+    to info["final_obs"]. Env i still follows a single env (reset as soon as it ends)."""
+    n, seed, horizon, steps = 3, 5, 30, 100
+    venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point",
+                        max_episode_steps=horizon, autoreset_mode="same_step", preset=JOINT,
+                        **kw)
+    assert venv.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    singles = [make(env_id, max_episode_steps=horizon, **kw) for _ in range(n)]
+    acts = np.random.default_rng(3).uniform(-1.2, 1.2, (steps, n, 1)).astype(np.float32)
+    vobs, _ = venv.reset(seed=seed)
+    for i, env in enumerate(singles):
+        np.testing.assert_array_equal(vobs[i], env.reset(seed=seed + i)[0])
+    ends = 0
+    for k in range(steps):
+        vobs, vrew, vterm, vtrunc, vinfo = venv.step(acts[k])
+        for i, env in enumerate(singles):
+            obs, r, term, trunc, info = env.step(acts[k, i])
+            assert vrew[i] == r and vterm[i] == term and vtrunc[i] == trunc, (k, i)
+            if term or trunc:
+                ends += 1
+                assert vinfo["_final_obs"][i]
+                np.testing.assert_array_equal(vinfo["final_obs"][i], obs)
+                assert vinfo["final_info"]["output_torque"][i] == info["output_torque"]
+                obs, info = env.reset()
+            else:
+                assert "final_obs" not in vinfo or not vinfo["_final_obs"][i]
+            np.testing.assert_array_equal(vobs[i], obs, err_msg=f"step {k} env {i}")
+            assert vinfo["motor_angle"][i] == info["motor_angle"]
+    assert ends >= n * 3
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point",
+                     autoreset_mode="sometimes")
+
+
+def test_sb3_vec_env_trains_and_reports_episode_ends():
+    """The SB3 VecEnv hands SB3 the native batch: terminal observations, truncation flags
+    and seeds follow SB3's conventions, and PPO runs on it."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from hdgym.envs.sb3 import HarmonicDriveVecEnv
+
+    venv = HarmonicDriveVecEnv(IDS[0], num_envs=4, max_episode_steps=20, preset=JOINT)
+    venv.seed(7)
+    first = venv.reset()
+    venv.seed(7)
+    np.testing.assert_array_equal(venv.reset(), first)
+    single = make(IDS[0], max_episode_steps=20)
+    np.testing.assert_array_equal(first[2], single.reset(seed=9)[0])
+    acts = np.zeros((4, 1), dtype=np.float32)
+    for _ in range(20):
+        obs, rew, dones, infos = venv.step(acts)
+        assert rew.shape == (4,) and dones.dtype == np.bool_ and len(infos) == 4
+    assert dones.all()  # every episode truncated at 20 steps
+    assert all(info["TimeLimit.truncated"] for info in infos)
+    assert all(venv.observation_space.contains(info["terminal_observation"]) for info in infos)
+    assert not np.array_equal(infos[0]["terminal_observation"], obs[0])  # obs is the new one
+    assert venv.get_attr("num_envs") == [4] * 4 and venv.env_is_wrapped(VecMonitor) == [False] * 4
+    model = PPO("MlpPolicy", VecMonitor(venv), n_steps=32, batch_size=64, n_epochs=1, seed=0)
+    model.learn(256)
+    assert model.num_timesteps >= 256
+    venv.close()
+
+
 def test_vector_spaces_and_reset_seed_list():
     venv = gym.make_vec(IDS[0], num_envs=4, vectorization_mode="vector_entry_point",
                         preset=JOINT)

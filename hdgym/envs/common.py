@@ -213,7 +213,8 @@ class JointBatch:
         self.all_fresh = np.ones(n, dtype=np.bool_)
         self.zeros2 = np.zeros((n, 2))
         self.noise_buf = np.zeros((n, NOISE_BLOCK, 2))
-        self.noise_ptr = NOISE_BLOCK
+        self.noise_ptr = np.full(n, NOISE_BLOCK)  # per env: envs can restart mid-step
+        self._all = np.arange(n)
         self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n)]
         # noise is drawn per env by this class (see module docstring), not by the bank
         quiet = replace(sens, torque_noise=0.0, current_noise=0.0)
@@ -232,7 +233,7 @@ class JointBatch:
         """Use these generators (one per env); a reseed restarts the noise blocks."""
         self.rngs = list(rngs)
         if reseeded:
-            self.noise_ptr = NOISE_BLOCK
+            self.noise_ptr[:] = NOISE_BLOCK
 
     def _draw_episode(self, i: int) -> float:
         rng = self.rngs[i]
@@ -252,15 +253,16 @@ class JointBatch:
         for j, i in enumerate(idx):
             self.tp[i] = self.task.draw(self.rngs[int(i)], float(x0[j, L.TH_O]), self.horizon)
 
-    def _noise(self) -> np.ndarray:
+    def _noise(self, idx: np.ndarray | None = None) -> np.ndarray:
+        """The next noise sample ``(len(idx), 2)`` of envs ``idx`` (all by default)."""
+        sel = self._all if idx is None else idx
         if not self.noise:
-            return self.zeros2
-        if self.noise_ptr >= NOISE_BLOCK:
-            for i in range(self.n):
-                self.noise_buf[i] = self.rngs[i].standard_normal((NOISE_BLOCK, 2))
-            self.noise_ptr = 0
-        z = self.noise_buf[:, self.noise_ptr, :]
-        self.noise_ptr += 1
+            return self.zeros2 if idx is None else np.zeros((len(idx), 2))
+        for i in sel[self.noise_ptr[sel] >= NOISE_BLOCK]:
+            self.rngs[i].standard_normal((NOISE_BLOCK, 2), out=self.noise_buf[i])
+            self.noise_ptr[i] = 0
+        z = self.noise_buf[sel, self.noise_ptr[sel]]
+        self.noise_ptr[sel] += 1
         return z
 
     def reset_all(self) -> None:
@@ -291,6 +293,24 @@ class JointBatch:
         self.post(self.xs, self.bad, meas, self._noise(), self.act, self.tp, self.ts,
                   self.steps, fresh, self.ctrl_dt, self.consts, self.obs, self.rew, self.term,
                   self.aux)
+
+    def restart(self, mask: np.ndarray) -> None:
+        """Start new episodes now for the envs in ``mask`` (same-step autoreset).
+
+        Their observation becomes the first of the new episode; the rewards and
+        episode ends of the step that finished them are left in place.
+        """
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            return
+        self.reset_envs(idx)
+        reading = self.bank.reset(self.xs, mask)[:, idx]
+        obs, ts, aux = self.obs[idx], self.ts[idx], self.aux[idx]
+        self.task.post(self.xs[idx], self.bad[idx], np.ascontiguousarray(reading),
+                       self._noise(idx), self.act[idx], self.tp[idx], ts, self.steps[idx],
+                       self.all_fresh[idx], self.ctrl_dt, self.consts, obs,
+                       np.zeros(idx.size), np.zeros(idx.size, dtype=np.bool_), aux)
+        self.obs[idx], self.ts[idx], self.aux[idx] = obs, ts, aux
 
     def true_states(self) -> np.ndarray:
         """``(n, 6)`` true states in :data:`INFO_STATES` order, NaN replaced by 0."""

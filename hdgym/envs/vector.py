@@ -11,9 +11,10 @@ results are the same either way.
 Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
 be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
 a single env reset with ``seed=s + i`` and given the same actions.
-Autoreset is ``NEXT_STEP`` (Gymnasium's default): the step after an env
-ends returns the first observation of its next episode, reward 0, and
-ignores that env's action.
+Autoreset is ``NEXT_STEP`` by default (Gymnasium's default): the step after
+an env ends returns the first observation of its next episode, reward 0, and
+ignores that env's action. ``autoreset_mode="same_step"`` resets it within
+the step that ended it instead (the old observation goes to ``info``).
 
 Actions ``(n, 1)`` (or ``(n,)``) in [-1, 1]; values beyond saturate like
 the amplifier, NaN or inf raise ``ValueError``. Observations, rewards and
@@ -49,6 +50,12 @@ class HarmonicDriveVectorEnv(VectorEnv):
         render_mode: ``"rgb_array"`` renders env 0.
         parallel: force the threaded (True) or serial (False) kernel;
             None picks by batch size.
+        autoreset_mode: ``AutoresetMode.NEXT_STEP`` (default, or
+            ``"next_step"``) or ``AutoresetMode.SAME_STEP`` (``"same_step"``:
+            an env that ends is reset within the same step, its last
+            observation and info go to ``info["final_obs"]`` and
+            ``info["final_info"]``, masked by ``info["_final_obs"]``; what
+            Stable-Baselines3 expects, see :mod:`hdgym.envs.sb3`).
         **kwargs: the single env's physics/hardware arguments (``preset``,
             ``without``, ``ctrl_dt``, ``n_substeps``, ``sensors``,
             ``randomize``, ``horizon``, ``torque_limit``, ``speed_limit``,
@@ -60,12 +67,25 @@ class HarmonicDriveVectorEnv(VectorEnv):
 
     def __init__(self, task: Any, num_envs: int = 1, max_episode_steps: int | None = 2000,
                  render_mode: str | None = None, parallel: bool | None = None,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
                  **kwargs: Any) -> None:
         if int(num_envs) != num_envs or num_envs < 1:
             raise ValueError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
                              f"None, got {render_mode!r}")
+        modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP,
+                 AutoresetMode.NEXT_STEP: AutoresetMode.NEXT_STEP,
+                 AutoresetMode.SAME_STEP: AutoresetMode.SAME_STEP}
+        key = autoreset_mode
+        if isinstance(key, str) and not isinstance(key, AutoresetMode):
+            key = key.lower()
+        mode = modes.get(key)
+        if mode is None:
+            raise ValueError(f"autoreset_mode must be 'next_step' or 'same_step' (or the "
+                             f"AutoresetMode), got {autoreset_mode!r}")
+        self.metadata = {**self.metadata, "autoreset_mode": mode}
+        self.autoreset_mode = mode
         self.num_envs = int(num_envs)
         self.batch = JointBatch(task, self.num_envs, **kwargs)
         if parallel is not None:
@@ -136,8 +156,19 @@ class HarmonicDriveVectorEnv(VectorEnv):
             trunc = b.steps >= self.max_episode_steps
         else:
             trunc = np.zeros(self.num_envs, dtype=np.bool_)
-        self.prev_done = term | trunc
-        return b.obs.copy(), b.rew.copy(), term, trunc, self._info()
+        rew = b.rew.copy()
+        ended = term | trunc
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self.prev_done = ended
+            return b.obs.copy(), rew, term, trunc, self._info()
+        if not ended.any():
+            return b.obs.copy(), rew, term, trunc, self._info()
+        final_obs, final_info = b.obs.copy(), self._info()
+        b.restart(ended)
+        info = self._info()
+        info["final_obs"], info["_final_obs"] = final_obs, ended
+        info["final_info"], info["_final_info"] = final_info, ended
+        return b.obs.copy(), rew, term, trunc, info
 
     def render(self) -> np.ndarray | None:
         """A frame of env 0 (``render_mode="rgb_array"``)."""
