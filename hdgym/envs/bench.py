@@ -161,7 +161,38 @@ def bench_envs(quick: bool = False, preset: Any = None) -> list[dict[str, Any]]:
         if nat is not venv:
             nat.close()
     venv.close()
+    out.append(_sb3_row(kw, quick))
     return out
+
+
+def _sb3_row(kw: dict[str, Any], quick: bool) -> dict[str, Any]:
+    """PPO (SB3) training throughput on the native batch against a DummyVecEnv of
+    single envs, 16 envs each (rollouts and updates, the whole ``learn`` call)."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from hdgym.envs.sb3 import HarmonicDriveVecEnv
+
+    n, total = 16, (2048 if quick else 16384)
+    ppo = {"n_steps": 128, "batch_size": 512, "n_epochs": 2, "seed": 0, "device": "cpu"}
+
+    def learner(make_venv: Callable[[], Any]) -> Callable[[], int]:
+        def run() -> int:
+            venv = make_venv()
+            model = PPO("MlpPolicy", venv, **ppo)
+            model.learn(total)
+            venv.close()
+            return model.num_timesteps
+        return run
+
+    native = learner(lambda: HarmonicDriveVecEnv(JOINT, num_envs=n, **kw))
+    dummy = learner(lambda: DummyVecEnv([lambda: gym.make(JOINT, **kw) for _ in range(n)]))
+    row = _compare(f"PPO training on HarmonicDriveVecEnv x{n} (hdgym.envs.sb3)",
+                   f"PPO training on DummyVecEnv({JOINT}) x{n}", 1.0, native, dummy, repeats=1)
+    row["note"] = (f"PPO from Stable-Baselines3, {total:,} env steps per run, rollouts of "
+                   f"{ppo['n_steps']} steps, {ppo['n_epochs']} epochs per update on the CPU; "
+                   "env-steps/s of the whole learn() call, updates included")
+    return row
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:
