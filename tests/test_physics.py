@@ -184,12 +184,10 @@ def test_lanes_match_reference():
 
 
 def test_lanes_match_kernel_locked():
-    """Locked output: the lanes agree with the one-env kernel (Maxwell hysteresis; the tanh
-    model's reversal memory is set off by a rounding-level torsion change at standstill,
-    which the two steps round differently)."""
+    """Locked output, every model: the lanes agree with the one-env kernel. The motor
+    sticks for long spells here, where the two round the kinematic error differently;
+    the tanh model's reversal deadband keeps that rounding from restarting its loop."""
     xs, ps, flags = _all_models(locked=True)
-    keep = ps[:, L.HMODEL] == 0
-    xs, ps, flags = xs[keep], ps[keep], flags[keep]
     current = lambda k: 2.0 * np.sin(0.05 * k)  # noqa: E731
     xl, _ = _run_lanes(xs, ps, flags, current, 300)
     xk = xs.copy()

@@ -101,6 +101,11 @@ LOADDEP = BIT["load_dependent_friction"]
 AMP = BIT["amplifier_saturation"]
 LOCKED = LOCKED_OUTPUT_BIT
 
+#: torsion increments (rad) below which the tanh hysteresis model does not
+#: register a reversal: rounding noise at standstill (1e-17 rad) must not
+#: restart its loop, while the slowest physical motion moves 1e-10 rad per substep
+REVERSAL_DEADBAND = 1e-14
+
 _jit = nb.njit(cache=True, fastmath={"contract"}, nogil=True)
 _inl = nb.njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 
@@ -346,7 +351,7 @@ def substeps_with(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: 
         diss = 0.0
         if tanh_model:
             s = x[HZ + 2]
-            if d_inc != 0.0:
+            if abs(d_inc) > REVERSAL_DEADBAND:
                 s_new = 1.0 if d_inc > 0.0 else -1.0
                 if s_new != s:  # reversal: remember where and how much
                     x[HZ] = dth - d_inc

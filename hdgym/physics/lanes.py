@@ -36,6 +36,7 @@ import numpy as np
 from hdgym.effects import BIT, LOCKED_OUTPUT_BIT
 from hdgym.params import MAX_HARMONICS, MAX_RIPPLES, MAX_SLIP_ELEMENTS
 from hdgym.physics import layout as L
+from hdgym.physics.kernel import REVERSAL_DEADBAND
 
 KE = BIT["kinematic_error"]
 NONLIN = BIT["nonlinear_stiffness"]
@@ -373,7 +374,7 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
         dth = _g(w, T_DTH, j)
         d_inc = _g(w, T_DINC, j)
         s = _g(w, hz + 2, j)
-        if d_inc != 0.0:
+        if abs(d_inc) > REVERSAL_DEADBAND:
             s_new = 1.0 if d_inc > 0.0 else -1.0
             if s_new != s:  # reversal: remember where and how much
                 _s(w, hz, j, dth - d_inc)

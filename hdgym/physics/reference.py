@@ -13,6 +13,7 @@ import numpy as np
 from hdgym.effects import BIT, LOCKED_OUTPUT_BIT
 from hdgym.params import MAX_HARMONICS, MAX_RIPPLES, MAX_SLIP_ELEMENTS
 from hdgym.physics import layout as L
+from hdgym.physics.kernel import REVERSAL_DEADBAND
 
 
 def _on(flags: np.ndarray, name: str) -> np.ndarray:
@@ -143,7 +144,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
         diss += np.where(use, slip, 0.0)
     # tanh element with last-reversal memory
     s = x[:, L.HZ + 2]
-    s_new = np.where(d_inc > 0, 1.0, np.where(d_inc < 0, -1.0, s))
+    s_new = np.where(d_inc > REVERSAL_DEADBAND, 1.0, np.where(d_inc < -REVERSAL_DEADBAND, -1.0, s))
     rev = tanh_model & (s_new != s)
     x[:, L.HZ] = np.where(rev, dth - d_inc, x[:, L.HZ])
     x[:, L.HZ + 1] = np.where(rev, x[:, L.HZ + 3], x[:, L.HZ + 1])
