@@ -251,3 +251,19 @@ def test_lanes_phases_stay_exact():
     lb.step(np.full(1, 3.0), np.zeros(1), 10, out, bad)  # resynced at the start of this one
     assert w[lanes.COUNT, 0] == 10
     assert phase_error() < 1e-13
+
+
+def test_lanes_reject_bad_shapes():
+    xs, ps, flags = _batch([make_joint()] * 3)
+    lb = lanes.LaneBatch(xs.copy(), ps, flags, 1e-4)
+    bad = np.zeros(3, dtype=np.bool_)
+    with pytest.raises(ValueError, match="i_cmd"):
+        lb.step(np.zeros(2), np.zeros(3), 10, xs, bad)
+    with pytest.raises(ValueError, match="xs"):
+        lb.step(np.zeros(3), np.zeros(3), 10, xs[:2], bad)
+    with pytest.raises(ValueError, match="n_sub"):
+        lb.step(np.zeros(3), np.zeros(3), 0, xs, bad)
+    with pytest.raises(ValueError, match="idx"):
+        lb.load(xs, ps, flags, [3])
+    with pytest.raises(ValueError, match="dt"):
+        lanes.LaneBatch(xs, ps, flags, 0.0)

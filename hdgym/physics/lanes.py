@@ -33,22 +33,22 @@ import math
 import numba as nb
 import numpy as np
 
-from hdgym.effects import BIT, LOCKED_OUTPUT_BIT
 from hdgym.params import MAX_HARMONICS, MAX_RIPPLES, MAX_SLIP_ELEMENTS
 from hdgym.physics import layout as L
-from hdgym.physics.kernel import REVERSAL_DEADBAND
-
-KE = BIT["kinematic_error"]
-NONLIN = BIT["nonlinear_stiffness"]
-HYST = BIT["hysteresis"]
-COUL = BIT["coulomb_friction"]
-VISC = BIT["viscous_friction"]
-STRIB = BIT["stribeck_friction"]
-STICK = BIT["stiction"]
-POSDEP = BIT["position_dependent_friction"]
-LOADDEP = BIT["load_dependent_friction"]
-AMP = BIT["amplifier_saturation"]
-LOCKED = LOCKED_OUTPUT_BIT
+from hdgym.physics.kernel import (
+    AMP,
+    COUL,
+    HYST,
+    KE,
+    LOADDEP,
+    LOCKED,
+    NONLIN,
+    POSDEP,
+    REVERSAL_DEADBAND,
+    STICK,
+    STRIB,
+    VISC,
+)
 
 # error_model="numpy": a division by zero in a lane whose result is discarded
 # must not raise (it would also stop the loop from vectorizing). The passes are
@@ -638,6 +638,13 @@ def _step_parallel(W: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray, n_sub: i
         _step_block(W, b, i_cmd, t_ext, n_sub, xs, bad)
 
 
+def _check(a: np.ndarray, shape: tuple[int, ...], name: str) -> None:
+    # the compiled loops do not check bounds: a wrong shape would read past the end
+    if not isinstance(a, np.ndarray) or a.shape != shape:
+        raise ValueError(f"{name} must be an array of shape {shape}, got "
+                         f"{getattr(a, 'shape', type(a).__name__)}")
+
+
 #: batch size from which :class:`LaneBatch` spreads its blocks over the cores
 #: (below it, starting the threads costs more than they save)
 PARALLEL_THRESHOLD = 256
@@ -657,6 +664,8 @@ class LaneBatch:
     def __init__(self, xs: np.ndarray, ps: np.ndarray, flags: np.ndarray, dt: float,
                  parallel: bool = False) -> None:
         self.n = xs.shape[0]
+        if not (dt > 0 and math.isfinite(dt)):
+            raise ValueError(f"dt must be > 0 s, got {dt!r}")
         self.dt = float(dt)
         n_blocks = (self.n + BLOCK - 1) // BLOCK
         # the last block's spare lanes are never computed
@@ -666,10 +675,25 @@ class LaneBatch:
 
     def load(self, xs: np.ndarray, ps: np.ndarray, flags: np.ndarray, idx: np.ndarray) -> None:
         """Take state, parameters and flags of envs ``idx`` (after a reset or a change)."""
-        _load(self.W, xs, ps, flags, self.dt, np.asarray(idx, dtype=np.int64))
+        n = self.n
+        _check(xs, (n, L.N_STATE), "xs")
+        _check(ps, (n, L.N_PARAMS), "ps")
+        _check(flags, (n,), "flags")
+        idx = np.asarray(idx, dtype=np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise ValueError(f"idx: env indices must be in [0, {n}), got {idx!r}")
+        _load(self.W, xs, ps, flags.astype(np.int64, copy=False), self.dt, idx)
 
     def step(self, i_cmd: np.ndarray, t_ext: np.ndarray, n_sub: int, xs: np.ndarray,
              bad: np.ndarray) -> None:
-        """One control period: ``n_sub`` substeps at currents ``i_cmd`` (A), loads ``t_ext``."""
+        """One control period: ``n_sub`` substeps at currents ``i_cmd`` (A), external
+        loads ``t_ext`` (N m); the new state goes to ``xs`` rows, divergence to ``bad``."""
+        n = self.n
+        _check(i_cmd, (n,), "i_cmd")
+        _check(t_ext, (n,), "t_ext")
+        _check(xs, (n, L.N_STATE), "xs")
+        _check(bad, (n,), "bad")
+        if int(n_sub) != n_sub or n_sub < 1:
+            raise ValueError(f"n_sub must be a whole number >= 1, got {n_sub!r}")
         fn = _step_parallel if self.parallel else _step_serial
         fn(self.W, i_cmd, t_ext, n_sub, xs, bad)
