@@ -251,6 +251,11 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
             if orders:
                 top = sorted(orders.items(), key=lambda kv: -kv[1])[:3]
                 extra = "; order lines " + ", ".join(f"{o} ({a:.2g})" for o, a in top)
+            levels = [(side, v) for side, v in detail.items()
+                      if isinstance(v, dict) and "static" in v]
+            if levels:  # breakaway signature: static against running level per side
+                extra += "; held while stuck vs running " + ", ".join(
+                    f"{side} {v['static']:.3g} vs {v['running']:.3g} N m" for side, v in levels)
             evid = (f"linearized refit explains {100 * ev['sensitivity_explained']:.0f} %, "
                     f"signature ({ev['signature']}) {100 * ev['signature_explained']:.0f} %; "
                     f"trial refit cuts cost {100 * ev['relative_improvement']:.0f} %{extra}")
