@@ -255,10 +255,16 @@ class JointBatch:
 
     def _noise(self, idx: np.ndarray | None = None) -> np.ndarray:
         """The next noise sample ``(len(idx), 2)`` of envs ``idx`` (all by default)."""
-        sel = self._all if idx is None else idx
         if not self.noise:
             return self.zeros2 if idx is None else np.zeros((len(idx), 2))
-        for i in sel[self.noise_ptr[sel] >= NOISE_BLOCK]:
+        ptr = self.noise_ptr
+        if idx is None and ptr[0] < NOISE_BLOCK and ptr[0] == ptr[-1] and (ptr == ptr[0]).all():
+            # the usual step: every env at the same sample, so a view does
+            z = self.noise_buf[:, ptr[0], :]
+            ptr += 1
+            return z
+        sel = self._all if idx is None else idx
+        for i in sel[ptr[sel] >= NOISE_BLOCK]:
             self.rngs[i].standard_normal((NOISE_BLOCK, 2), out=self.noise_buf[i])
             self.noise_ptr[i] = 0
         z = self.noise_buf[sel, self.noise_ptr[sel]]
