@@ -41,6 +41,32 @@ def action_to_current(action: np.ndarray, current_limit: np.ndarray | float) -> 
     return np.clip(action, -1.0, 1.0) * current_limit
 
 
+@nb.njit(cache=True)
+def _scale_actions(a: np.ndarray, limit: np.ndarray, clipped: np.ndarray,
+                   current: np.ndarray) -> int:
+    for i in range(a.shape[0]):
+        v = float(a[i])
+        if not math.isfinite(v):
+            return i
+        v = 1.0 if v > 1.0 else (-1.0 if v < -1.0 else v)
+        clipped[i] = v
+        current[i] = v * limit[i]
+    return -1
+
+
+def scale_actions(actions: np.ndarray, current_limit: np.ndarray, clipped: np.ndarray,
+                  current: np.ndarray) -> None:
+    """:func:`action_to_current` for a batch, into preallocated arrays.
+
+    ``clipped`` receives the actions clipped to [-1, 1], ``current`` the
+    current commands (A) for per-env limits ``current_limit``. A NaN or
+    infinite action raises ``ValueError`` naming the env.
+    """
+    bad = _scale_actions(actions, current_limit, clipped, current)
+    if bad >= 0:
+        raise ValueError(f"action must be finite, got {actions[bad]!r} for env {bad}")
+
+
 def quantize(angle: np.ndarray, counts_per_rev: np.ndarray | float) -> np.ndarray:
     """Angle as an incremental encoder reports it (floor to whole counts), rad."""
     step = 2.0 * math.pi / np.asarray(counts_per_rev, dtype=float)

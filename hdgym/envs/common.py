@@ -41,7 +41,8 @@ NOISE_BLOCK = 256
 #: true-state names reported in ``info`` (state columns 0..5 of the layout)
 INFO_STATES = ("motor_angle", "motor_velocity", "output_angle", "output_velocity",
                "motor_current", "output_torque")
-_INFO_COLS = np.array([L.TH_M, L.W_M, L.TH_O, L.W_O, L.CUR, L.TK])
+_INFO_COLS = slice(L.TH_M, L.TK + 1)
+assert [L.TH_M, L.W_M, L.TH_O, L.W_O, L.CUR, L.TK] == list(range(6))  # a slice, not a gather
 
 # parameter-row columns that are switches, counts or orders, not physical values
 _NOT_RANDOMIZABLE = re.compile(
@@ -319,9 +320,9 @@ class JointBatch:
         self.obs[idx], self.ts[idx], self.aux[idx] = obs, ts, aux
 
     def true_states(self) -> np.ndarray:
-        """``(n, 6)`` true states in :data:`INFO_STATES` order, NaN replaced by 0."""
+        """A fresh ``(n, 6)`` array of the true states in :data:`INFO_STATES` order, NaN -> 0."""
         s = self.xs[:, _INFO_COLS]
-        return np.nan_to_num(s, nan=0.0, posinf=0.0, neginf=0.0) if self.bad.any() else s
+        return np.nan_to_num(s, nan=0.0, posinf=0.0, neginf=0.0) if self.bad.any() else s.copy()
 
 
 def observation_space(task: Any) -> spaces.Box:

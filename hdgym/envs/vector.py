@@ -35,7 +35,7 @@ from gymnasium.vector.utils import batch_space
 
 from hdgym.envs.common import INFO_STATES, JointBatch, action_space, observation_space
 from hdgym.envs.tasks import ResonanceTask, TrackingTask
-from hdgym.hardware import action_to_current
+from hdgym.hardware import scale_actions
 from hdgym.physics import layout as L
 
 
@@ -105,7 +105,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
 
     def _info(self) -> dict[str, Any]:
         b = self.batch
-        s = np.ascontiguousarray(b.true_states().T)  # one fresh copy; its rows are handed out
+        s = b.true_states().T  # a fresh copy; its rows are handed out
         info: dict[str, Any] = {}
         for k, name in enumerate(INFO_STATES):
             info[name] = s[k]
@@ -143,12 +143,11 @@ class HarmonicDriveVectorEnv(VectorEnv):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
         b = self.batch
-        a = np.asarray(actions, dtype=float)
-        if a.size != self.num_envs:
-            raise ValueError(f"actions must have shape ({self.num_envs}, 1), got {a.shape}")
-        a = a.reshape(self.num_envs)
-        b.i_cmd[:] = action_to_current(a, b.rows[:, L.I_MAX])  # raises on NaN/inf
-        np.clip(a, -1.0, 1.0, out=b.act)
+        a = np.asarray(actions)
+        if a.size != self.num_envs or a.dtype.kind not in "fiu":
+            raise ValueError(f"actions must be numbers of shape ({self.num_envs}, 1), got "
+                             f"{a.dtype} {a.shape}")
+        scale_actions(a.reshape(self.num_envs), b.rows[:, L.I_MAX], b.act, b.i_cmd)
         done = self.prev_done
         b.advance(done if done.any() else None)
         term = b.term.copy()
