@@ -113,6 +113,7 @@ KE_O = _rows(MAX_HARMONICS)  # order
 KE_PH = _rows(MAX_HARMONICS)  # phase
 SLIP_K = _rows(MAX_SLIP_ELEMENTS)
 SLIP_W = _rows(MAX_SLIP_ELEMENTS)
+SLIP_WK = _rows(MAX_SLIP_ELEMENTS)  # strength / stiffness (0 for a rigid element)
 #: per friction side (input, output), offsets from SIDE[side]: Coulomb level,
 #: level when stuck, Stribeck on, breakaway, Stribeck speed, viscous b1, b2,
 #: peak speed^2, peak torque, then ripple amplitudes, orders, frames, phases
@@ -203,6 +204,8 @@ def _prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) -
     for k in range(MAX_SLIP_ELEMENTS):
         _s(w, SLIP_K + k, j, p[L.SLIP_K + k] if k < nslip else 0.0)
         _s(w, SLIP_W + k, j, p[L.SLIP_W + k] if k < nslip else 0.0)
+        kap = p[L.SLIP_K + k]
+        _s(w, SLIP_WK + k, j, p[L.SLIP_W + k] / kap if (k < nslip and kap > 0.0) else 0.0)
     nke = int(p[L.NKE]) if (flags & KE) else 0
     _s(w, NKE, j, nke)
     for k in range(MAX_HARMONICS):
@@ -286,30 +289,51 @@ def _sincos_small(d: float) -> tuple[float, float]:
 
 
 @_inl
+def _sincos_tiny(d: float) -> tuple[float, float]:
+    """sin and cos of |d| < 0.05 (Taylor to d^9 / d^10: truncation below 2e-22)."""
+    z = d * d
+    sd = d * (1.0 + z * (-1.0 / 6.0 + z * (1.0 / 120.0 + z * (
+        -1.0 / 5040.0 + z / 362880.0))))
+    cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (
+        1.0 / 40320.0 - z / 3628800.0))))
+    return sd, cd
+
+
+@_inl
 def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
     """Rotate phase ``ph`` of every lane by its increment in field T_D."""
+    mid = 0
     big = 0
     for j in range(nl):
-        big += 1 if abs(_g(w, T_D, j)) >= 0.3 else 0
-    if big == 0:  # the usual case: a vector loop over the Taylor series
+        a = abs(_g(w, T_D, j))
+        mid += 1 if a >= 0.05 else 0
+        big += 1 if a >= 0.3 else 0
+    if mid == 0:  # the usual case at 10 substeps per ms: a short series, vectorized
+        for j in range(nl):
+            sd, cd = _sincos_tiny(_g(w, T_D, j))
+            s = _g(w, SIN + ph, j)
+            c = _g(w, COS + ph, j)
+            _s(w, SIN + ph, j, s * cd + c * sd)
+            _s(w, COS + ph, j, c * cd - s * sd)
+    elif big == 0:
         for j in range(nl):
             sd, cd = _sincos_small(_g(w, T_D, j))
             s = _g(w, SIN + ph, j)
             c = _g(w, COS + ph, j)
             _s(w, SIN + ph, j, s * cd + c * sd)
             _s(w, COS + ph, j, c * cd - s * sd)
-        return
-    for j in range(nl):  # coarse substeps or very fast motors
-        d = _g(w, T_D, j)
-        if abs(d) < 0.3:
-            sd, cd = _sincos_small(d)
-        else:
-            sd = math.sin(d)
-            cd = math.cos(d)
-        s = _g(w, SIN + ph, j)
-        c = _g(w, COS + ph, j)
-        _s(w, SIN + ph, j, s * cd + c * sd)
-        _s(w, COS + ph, j, c * cd - s * sd)
+    else:
+        for j in range(nl):  # coarse substeps or very fast motors
+            d = _g(w, T_D, j)
+            if abs(d) < 0.3:
+                sd, cd = _sincos_small(d)
+            else:
+                sd = math.sin(d)
+                cd = math.cos(d)
+            s = _g(w, SIN + ph, j)
+            c = _g(w, COS + ph, j)
+            _s(w, SIN + ph, j, s * cd + c * sd)
+            _s(w, COS + ph, j, c * cd - s * sd)
 
 
 @_inl
@@ -388,23 +412,41 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
         _s(w, T_TH, j, t_h)
 
 
+#: 2**-k for k = 0..63, for :func:`_exp_neg`
+_POW2_NEG = np.array([2.0 ** -k for k in range(64)])
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 split so k * _LN2_HI is exact (fdlibm)
+_LN2_LO = 1.90821492927058770002e-10
+
+
+@_inl
+def _exp_neg(x: float) -> float:
+    """exp(-x) for 0 <= x <= 40 (within 2 ulp of libm), in a form that vectorizes:
+    exp(-x) = 2**-k exp(u), k = round(x / ln 2), |u| <= ln(2)/2, exp(u) by Taylor to u^13."""
+    k = math.floor(x * 1.4426950408889634 + 0.5)
+    u = (k * _LN2_HI - x) + k * _LN2_LO
+    e = 1.0 + u * (1.0 + u * (1.0 / 2.0 + u * (1.0 / 6.0 + u * (1.0 / 24.0 + u * (
+        1.0 / 120.0 + u * (1.0 / 720.0 + u * (1.0 / 5040.0 + u * (1.0 / 40320.0 + u * (
+            1.0 / 362880.0 + u * (1.0 / 3628800.0 + u * (1.0 / 39916800.0 + u * (
+                1.0 / 479001600.0 + u / 6227020800.0))))))))))))
+    return _POW2_NEG[int(k)] * e
+
+
 @_inl
 def _stribeck(w: np.ndarray, nl: int) -> None:
-    """Stribeck level where it is not negligible (scalar: it needs exp)."""
-    for j in range(nl):
-        for side in range(2):
-            at = SIDE[side]
-            if _g(w, at + F_STRIB, j) == 0.0:
-                continue
-            v = _g(w, L.W_M if side == 0 else L.W_O, j)
-            if v == 0.0:
-                continue
+    """Stribeck levels: ``fc + (fs - fc) exp(-(v/v_s)^2)`` on sides that have it."""
+    for side in range(2):
+        at = SIDE[side]
+        lvl = T_LIN if side == 0 else T_LOUT
+        speed = L.W_M if side == 0 else L.W_O
+        for j in range(nl):
+            v = _g(w, speed, j)
             r = v / _g(w, at + F_WS, j)
             r2 = r * r
-            if r2 < 40.0:  # exp(-40) < 5e-18: skip far above the Stribeck speed
-                fc = _g(w, at + F_FC, j)
-                _s(w, T_LIN if side == 0 else T_LOUT, j,
-                   fc + (_g(w, at + F_FS, j) - fc) * math.exp(-r2))
+            # exp(-40) < 5e-18: the hump is gone far above the Stribeck speed
+            on = _g(w, at + F_STRIB, j) != 0.0 and v != 0.0 and r2 < 40.0
+            fc = _g(w, at + F_FC, j)
+            hump = fc + (_g(w, at + F_FS, j) - fc) * _exp_neg(min(r2, 40.0))
+            _s(w, lvl, j, hump if on else _g(w, lvl, j))
 
 
 @_inl
@@ -440,8 +482,9 @@ def _maxwell(w: np.ndarray, nl: int, nslip: int) -> None:
             f = f0 + kap * _g(w, T_DINC, j)
             up = f > wk
             down = f < -wk
-            dd = wk * (f - wk) / kap if up else (wk * (-wk - f) / kap if down else 0.0)
-            dd = dd if kap > 0.0 else 0.0
+            # energy of the slip: W/kappa times the force beyond W
+            wdk = _g(w, SLIP_WK + k, j)
+            dd = (f - wk) * wdk if up else ((-wk - f) * wdk if down else 0.0)
             f = wk if up else (-wk if down else f)
             on = k < _g(w, NSLIP, j)
             _s(w, hz, j, f if on else f0)
