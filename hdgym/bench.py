@@ -173,6 +173,12 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
         bench_envs = None
     if bench_envs is not None:
         sections["Gymnasium environments"] = bench_envs(quick)
+    try:  # the SB3 layer (agents, extra "rl") sits above hdgym; only the report reaches up
+        from agents.bench import bench_sb3
+    except ImportError:
+        bench_sb3 = None
+    if bench_sb3 is not None:
+        sections["Stable-Baselines3 training"] = bench_sb3(quick)
     try:
         from hdgym.discrepancy.bench import bench_diagnose
     except ImportError:

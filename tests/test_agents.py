@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -16,6 +17,7 @@ from agents.evaluate import episode_metrics, evaluate  # noqa: E402
 from agents.evaluate import main as evaluate_main  # noqa: E402
 from agents.report import trap_only_config  # noqa: E402
 from agents.train import main as train_main  # noqa: E402
+from agents.vec_env import HarmonicDriveVecEnv  # noqa: E402
 from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT, TRAP_ONLY_CURRENT_LIMIT  # noqa: E402
 from hdgym.params import preset  # noqa: E402
 
@@ -124,3 +126,38 @@ def test_cli_errors_exit_2(tmp_path, capsys):
     assert "no such file" in capsys.readouterr().err
     assert train_main(["--config", str(tmp_path / "nope.toml"), "--no-progress"]) == 2
     assert train_main(["--config", "resonance_sac", "--algo", "ppo", "--no-progress"]) == 2
+
+
+def test_sb3_vec_env_trains_and_reports_episode_ends():
+    """The SB3 VecEnv hands SB3 the native batch: terminal observations, truncation flags
+    and seeds follow SB3's conventions, and PPO runs on it."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    venv = HarmonicDriveVecEnv("HarmonicDriveJoint-v0", num_envs=4, max_episode_steps=20,
+                               preset="tuttle-joint1")
+    venv.seed(7)
+    first = venv.reset()
+    venv.seed(7)
+    np.testing.assert_array_equal(venv.reset(), first)
+    single = gym.make("HarmonicDriveJoint-v0", preset="tuttle-joint1", max_episode_steps=20)
+    np.testing.assert_array_equal(first[2], single.reset(seed=9)[0])
+    acts = np.zeros((4, 1), dtype=np.float32)
+    for _ in range(20):
+        obs, rew, dones, infos = venv.step(acts)
+        assert rew.shape == (4,) and dones.dtype == np.bool_ and len(infos) == 4
+    assert dones.all()  # every episode truncated at 20 steps
+    assert all(info["TimeLimit.truncated"] for info in infos)
+    assert all(venv.observation_space.contains(info["terminal_observation"]) for info in infos)
+    assert not np.array_equal(infos[0]["terminal_observation"], obs[0])  # obs is the new one
+    assert venv.get_attr("num_envs") == [4] * 4 and venv.env_is_wrapped(VecMonitor) == [False] * 4
+    model = PPO("MlpPolicy", VecMonitor(venv), n_steps=32, batch_size=64, n_epochs=1, seed=0)
+    model.learn(256)
+    assert model.num_timesteps >= 256
+    venv.close()
+
+
+
+def test_sb3_vec_env_rejects_its_fixed_autoreset():
+    with pytest.raises(ValueError, match="autoreset_mode"):
+        HarmonicDriveVecEnv("HarmonicDriveJoint-v0", num_envs=2, autoreset_mode="next_step")

@@ -264,36 +264,6 @@ def test_vector_same_step_autoreset_equals_single_envs(env_id, kw):
                      autoreset_mode="sometimes")
 
 
-def test_sb3_vec_env_trains_and_reports_episode_ends():
-    """The SB3 VecEnv hands SB3 the native batch: terminal observations, truncation flags
-    and seeds follow SB3's conventions, and PPO runs on it."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import VecMonitor
-
-    from hdgym.envs.sb3 import HarmonicDriveVecEnv
-
-    venv = HarmonicDriveVecEnv(IDS[0], num_envs=4, max_episode_steps=20, preset=JOINT)
-    venv.seed(7)
-    first = venv.reset()
-    venv.seed(7)
-    np.testing.assert_array_equal(venv.reset(), first)
-    single = make(IDS[0], max_episode_steps=20)
-    np.testing.assert_array_equal(first[2], single.reset(seed=9)[0])
-    acts = np.zeros((4, 1), dtype=np.float32)
-    for _ in range(20):
-        obs, rew, dones, infos = venv.step(acts)
-        assert rew.shape == (4,) and dones.dtype == np.bool_ and len(infos) == 4
-    assert dones.all()  # every episode truncated at 20 steps
-    assert all(info["TimeLimit.truncated"] for info in infos)
-    assert all(venv.observation_space.contains(info["terminal_observation"]) for info in infos)
-    assert not np.array_equal(infos[0]["terminal_observation"], obs[0])  # obs is the new one
-    assert venv.get_attr("num_envs") == [4] * 4 and venv.env_is_wrapped(VecMonitor) == [False] * 4
-    model = PPO("MlpPolicy", VecMonitor(venv), n_steps=32, batch_size=64, n_epochs=1, seed=0)
-    model.learn(256)
-    assert model.num_timesteps >= 256
-    venv.close()
-
-
 def test_vector_spaces_and_reset_seed_list():
     venv = gym.make_vec(IDS[0], num_envs=4, vectorization_mode="vector_entry_point",
                         preset=JOINT)

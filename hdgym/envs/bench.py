@@ -61,8 +61,10 @@ def _vector_runner(env: Any, actions: np.ndarray) -> Callable[[], int]:
     return run
 
 
-def _compare(name: str, ref_name: str, target: float, mine: Callable[[], int],
-             ref: Callable[[], int], repeats: int = 3) -> dict[str, Any]:
+def compare_rates(name: str, ref_name: str, target: float, mine: Callable[[], int],
+                  ref: Callable[[], int], repeats: int = 3) -> dict[str, Any]:
+    """Best rate of ``mine`` against ``ref`` (each returns the env steps it ran), timed
+    alternately after one warm-up call each; a row of :func:`bench_envs`."""
     mine()  # warm-up (compilation, caches)
     ref()
     a, b = [], []
@@ -117,8 +119,8 @@ def bench_envs(quick: bool = False, preset: Any = None) -> list[dict[str, Any]]:
     pend = gym.make("Pendulum-v1")
     pend.reset(seed=0)
     a1 = rng.uniform(-1, 1, (n_single, 1)).astype(np.float32)
-    out.append(_compare(f"{JOINT} single (gym.make)", "Pendulum-v1 (gym.make)", 0.5,
-                        _single_runner(env, a1), _single_runner(pend, 2.0 * a1)))
+    out.append(compare_rates(f"{JOINT} single (gym.make)", "Pendulum-v1 (gym.make)", 0.5,
+                             _single_runner(env, a1), _single_runner(pend, 2.0 * a1)))
     env.close()
     pend.close()
 
@@ -131,8 +133,8 @@ def bench_envs(quick: bool = False, preset: Any = None) -> list[dict[str, Any]]:
     cart.reset(seed=0)
     av = rng.uniform(-1, 1, (steps, n_vec, 1)).astype(np.float32)
     ac = rng.integers(0, 2, (steps, n_vec))
-    row = _compare(f"{JOINT} native vector x{n_vec}", f"CartPoleVectorEnv x{n_vec}", 0.3,
-                   _vector_runner(venv, av), _vector_runner(cart, ac))
+    row = compare_rates(f"{JOINT} native vector x{n_vec}", f"CartPoleVectorEnv x{n_vec}", 0.3,
+                        _vector_runner(venv, av), _vector_runner(cart, ac))
     bare = _kernel_rate(venv, steps)
     vb = venv.unwrapped.batch
     where = f"{numba.config.NUMBA_NUM_THREADS} threads" if vb.lanes.parallel else "one thread"
@@ -155,44 +157,13 @@ def bench_envs(quick: bool = False, preset: Any = None) -> list[dict[str, Any]]:
         sync = gym.make_vec(JOINT, num_envs=n, vectorization_mode="sync", **kw)
         sync.reset(seed=0)
         a = rng.uniform(-1, 1, (n_steps, n, 1)).astype(np.float32)
-        out.append(_compare(f"{JOINT} native vector x{n}", f"SyncVectorEnv({JOINT}) x{n}", 1.0,
-                            _vector_runner(nat, a), _vector_runner(sync, a)))
+        out.append(compare_rates(f"{JOINT} native vector x{n}", f"SyncVectorEnv({JOINT}) x{n}",
+                                 1.0, _vector_runner(nat, a), _vector_runner(sync, a)))
         sync.close()
         if nat is not venv:
             nat.close()
     venv.close()
-    out.append(_sb3_row(kw, quick))
     return out
-
-
-def _sb3_row(kw: dict[str, Any], quick: bool) -> dict[str, Any]:
-    """PPO (SB3) training throughput on the native batch against a DummyVecEnv of
-    single envs, 16 envs each (rollouts and updates, the whole ``learn`` call)."""
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    from hdgym.envs.sb3 import HarmonicDriveVecEnv
-
-    n, total = 16, (2048 if quick else 16384)
-    ppo = {"n_steps": 128, "batch_size": 512, "n_epochs": 2, "seed": 0, "device": "cpu"}
-
-    def learner(make_venv: Callable[[], Any]) -> Callable[[], int]:
-        def run() -> int:
-            venv = make_venv()
-            model = PPO("MlpPolicy", venv, **ppo)
-            model.learn(total)
-            venv.close()
-            return model.num_timesteps
-        return run
-
-    native = learner(lambda: HarmonicDriveVecEnv(JOINT, num_envs=n, **kw))
-    dummy = learner(lambda: DummyVecEnv([lambda: gym.make(JOINT, **kw) for _ in range(n)]))
-    row = _compare(f"PPO training on HarmonicDriveVecEnv x{n} (hdgym.envs.sb3)",
-                   f"PPO training on DummyVecEnv({JOINT}) x{n}", 1.0, native, dummy, repeats=1)
-    row["note"] = (f"PPO from Stable-Baselines3, {total:,} env steps per run, rollouts of "
-                   f"{ppo['n_steps']} steps, {ppo['n_epochs']} epochs per update on the CPU; "
-                   "env-steps/s of the whole learn() call, updates included")
-    return row
 
 
 def format_table(rows: list[dict[str, Any]]) -> str:

@@ -55,7 +55,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
             an env that ends is reset within the same step, its last
             observation and info go to ``info["final_obs"]`` and
             ``info["final_info"]``, masked by ``info["_final_obs"]``; what
-            Stable-Baselines3 expects, see :mod:`hdgym.envs.sb3`).
+            Stable-Baselines3 expects, see ``agents.vec_env``).
         **kwargs: the single env's physics/hardware arguments (``preset``,
             ``without``, ``ctrl_dt``, ``n_substeps``, ``sensors``,
             ``randomize``, ``horizon``, ``torque_limit``, ``speed_limit``,

@@ -1,4 +1,4 @@
-"""Stable-Baselines3 ``VecEnv`` over the native vector env.
+"""Stable-Baselines3 ``VecEnv`` over hdgym's native vector env.
 
 SB3 steps a ``VecEnv``; wrapping a Gymnasium vector env in SB3's
 ``DummyVecEnv`` would step ``n`` Python envs one by one. :class:`HarmonicDriveVecEnv`
@@ -8,7 +8,7 @@ same-step autoreset SB3 expects::
 
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecMonitor
-    from hdgym.envs.sb3 import HarmonicDriveVecEnv
+    from agents.vec_env import HarmonicDriveVecEnv
 
     venv = VecMonitor(HarmonicDriveVecEnv("HarmonicDriveJoint-v0", num_envs=64))
     PPO("MlpPolicy", venv, n_steps=256).learn(100_000)

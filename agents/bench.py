@@ -1,0 +1,41 @@
+"""SB3 training throughput for ``hdgym bench``, measured side by side in one run."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+
+from agents.vec_env import HarmonicDriveVecEnv
+from hdgym.envs.bench import JOINT, compare_rates
+
+
+def bench_sb3(quick: bool = False, **kw: Any) -> list[dict[str, Any]]:
+    """PPO (SB3) training throughput on :class:`~agents.vec_env.HarmonicDriveVecEnv`
+    against a DummyVecEnv of single envs, 16 envs each (rollouts and updates, the
+    whole ``learn`` call). ``kw`` goes to the envs."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    n, total = 16, (2048 if quick else 16384)
+    ppo = {"n_steps": 128, "batch_size": 512, "n_epochs": 2, "seed": 0, "device": "cpu"}
+
+    def learner(make_venv: Callable[[], Any]) -> Callable[[], int]:
+        def run() -> int:
+            venv = make_venv()
+            model = PPO("MlpPolicy", venv, **ppo)
+            model.learn(total)
+            venv.close()
+            return model.num_timesteps
+        return run
+
+    native = learner(lambda: HarmonicDriveVecEnv(JOINT, num_envs=n, **kw))
+    dummy = learner(lambda: DummyVecEnv([lambda: gym.make(JOINT, **kw) for _ in range(n)]))
+    row = compare_rates(f"PPO training on HarmonicDriveVecEnv x{n} (agents.vec_env)",
+                        f"PPO training on DummyVecEnv({JOINT}) x{n}", 1.0, native, dummy,
+                        repeats=1)
+    row["note"] = (f"PPO from Stable-Baselines3, {total:,} env steps per run, rollouts of "
+                   f"{ppo['n_steps']} steps, {ppo['n_epochs']} epochs per update on the CPU; "
+                   "env-steps/s of the whole learn() call, updates included")
+    return [row]
