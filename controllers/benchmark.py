@@ -621,8 +621,8 @@ def _markdown(results: dict[str, Any], quick: bool, elapsed: float) -> str:
         "recorded current). The PID acts on the motor encoder (semi-closed loop) and is "
         "designed with python-control on the linearized joint "
         "(`controllers.tuning.design_pid`, 45° phase margin, crossover lowered until "
-        "`control.margin` also gives ≥ 6 dB gain margin across the resonance), with "
-        "inertia feedforward of the nominal rigid-body inertia.",
+        "`controllers.tuning.loop_margins` also gives ≥ 6 dB gain margin across the "
+        "resonance), with inertia feedforward of the nominal rigid-body inertia.",
         "",
         "## Targets",
         "",

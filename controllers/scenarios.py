@@ -111,8 +111,8 @@ def motor_pid(p: JointParams, crossover_hz: float | None = None,
     one with the higher crossover. With ``notch_filter`` a notch
     (:func:`controllers.filters.notch`, width 0.35, depth 0.1) sits at the
     linear torsional resonance and is part of the design. The crossover
-    starts at a quarter of the resonance and is
-    lowered until :func:`control.margin` reports the wanted phase margin
+    starts at a quarter of the resonance and is lowered until
+    :func:`controllers.tuning.loop_margins` reports the wanted phase margin
     (within 1 deg) and at least 6 dB gain margin on the whole loop, the
     resonance included; the sample-and-hold plus computation delay is
     modelled as one period. Inertia feedforward uses the nominal rigid-body

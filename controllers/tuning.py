@@ -20,7 +20,8 @@ coefficients. Coulomb-type friction, stiction and amplifier saturation are
 not linear and are left out.
 
 :func:`design_pid` places a PID's gain crossover at a chosen frequency with
-a chosen phase margin and checks the result with :func:`control.margin`.
+a chosen phase margin and checks the result with :func:`loop_margins`
+(python-control's margins on the frequency response).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from dataclasses import dataclass
 
 import control
 import numpy as np
+from scipy.optimize import brentq
 
 from controllers.base import check_nonneg, check_positive
 from controllers.pid import PID
@@ -148,7 +150,7 @@ def resonance_hz(p: JointParams, torque: float = 0.0) -> float:
 
 @dataclass(frozen=True)
 class PIDDesign:
-    """A PID designed on a linear model: gains and the margins control.margin reports.
+    """A PID designed on a linear model: gains and the margins :func:`loop_margins` reports.
 
     ``C(s) = kp + ki/s + kd s/(tf s + 1)`` (units: A per rad of the fed-back angle).
     """
@@ -175,6 +177,40 @@ class PIDDesign:
                    u_max=u_limit, **kwargs)
 
 
+def loop_margins(loop: control.LTI, around: float) -> tuple[float, float, float, float]:
+    """(gain margin, phase margin in deg, phase and gain crossover in rad/s) of ``loop``.
+
+    The crossings of ``|L| = 1`` and of the negative real axis are bracketed
+    on the frequency response over four decades either side of ``around``
+    (rad/s) and refined by root finding on ``L(jw)`` itself; the margins are
+    then picked as :func:`control.margin` picks them (the gain margin closest
+    to 0 dB, the smallest phase margin). :func:`control.margin`'s polynomial
+    method overflows on a high-order loop (a PID, a notch, a Padé delay and
+    a resonance) and its frequency-response method takes a minute on a grid
+    this fine.
+    """
+    def at(lw: float) -> complex:
+        return complex(np.asarray(loop(1j * math.exp(lw))).reshape(-1)[0])
+
+    lws = np.linspace(math.log(around) - 4 * math.log(10), math.log(around) + 4 * math.log(10),
+                      8001)
+    h = np.asarray(loop(1j * np.exp(lws))).reshape(-1)
+    with np.errstate(divide="ignore"):
+        g = np.log(np.abs(h))
+    wc = [math.exp(brentq(lambda lw: math.log(abs(at(lw))), lws[i], lws[i + 1]))
+          for i in np.nonzero((g[:-1] < 0) != (g[1:] < 0))[0]]
+    cross = np.nonzero(((h.imag[:-1] < 0) != (h.imag[1:] < 0))
+                       & (h.real[:-1] + h.real[1:] < 0))[0]
+    w180 = [math.exp(brentq(lambda lw: at(lw).imag, lws[i], lws[i + 1])) for i in cross]
+    gms = [1.0 / abs(at(math.log(w))) for w in w180]
+    pms = [float(np.remainder(np.degrees(np.angle(at(math.log(w)))), 360.0) - 180.0)
+           for w in wc]
+    k = int(np.argmin(np.abs(np.log(gms)))) if gms else -1
+    m = int(np.argmin(np.abs(pms))) if pms else -1
+    return (gms[k] if k >= 0 else math.inf, pms[m] if m >= 0 else math.inf,
+            w180[k] if k >= 0 else math.nan, wc[m] if m >= 0 else math.nan)
+
+
 def design_pid(plant: control.LTI, crossover_hz: float, phase_margin_deg: float = 50.0, *,
                ti_over_td: float = 4.0, derivative_filter: float = 8.0,
                delay: float = 0.0, loop_filter: control.LTI | None = None) -> PIDDesign:
@@ -185,7 +221,7 @@ def design_pid(plant: control.LTI, crossover_hz: float, phase_margin_deg: float 
     the loop phase at the crossover is ``-180 deg + phase_margin``, then
     ``kp`` so that the loop gain there is one. The sample-and-hold and
     computation delay (``delay``, s, e.g. ``1.5 * dt``) enters as a Padé
-    approximation. The achieved margins come from :func:`control.margin`.
+    approximation. The achieved margins come from :func:`loop_margins`.
 
     Args:
         plant: SISO system from current (A) to the fed-back angle (rad).
@@ -243,7 +279,7 @@ def design_pid(plant: control.LTI, crossover_hz: float, phase_margin_deg: float 
     s = control.tf("s")
     cs = kp + ki / s + kd * s / (tf * s + 1)
     loop = control.minreal(cs * control.tf(plant), verbose=False)
-    gm, pm_got, _, wcp = control.margin(loop)
+    gm, pm_got, _, wcp = loop_margins(loop, wc)
     gm_db = 20 * math.log10(gm) if gm and np.isfinite(gm) and gm > 0 else math.inf
     return PIDDesign(kp=float(kp), ki=float(ki), kd=float(kd), tf=float(tf),
                      crossover_hz=float(wcp / (2 * math.pi)) if np.isfinite(wcp) else math.nan,

@@ -168,6 +168,24 @@ def test_design_pid_reaches_phase_margin() -> None:
     assert design.phase_margin_deg >= 44.0 and design.gain_margin_db >= 6.0
 
 
+def test_loop_margins_agree_with_python_control_without_overflow() -> None:
+    """On a low-order loop both methods work and agree; on the high-order design loop
+    the frequency-response margins raise no overflow warning."""
+    import warnings
+
+    import control
+
+    s = control.tf("s")
+    loop = 40.0 / (s * (s + 2.0) * (s + 10.0))
+    gm, pm, wcg, wcp = control.margin(loop)
+    got = tuning.loop_margins(loop, wcp)
+    assert got == pytest.approx((gm, pm, wcg, wcp), rel=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        _, design = scenarios.motor_pid(preset("tuttle-joint1"))
+    assert design.phase_margin_deg == pytest.approx(45.0, abs=1.0)
+
+
 # ------------------------------------------------------------------ improvements
 
 
