@@ -267,3 +267,12 @@ def test_lanes_reject_bad_shapes():
         lb.load(xs, ps, flags, [3])
     with pytest.raises(ValueError, match="dt"):
         lanes.LaneBatch(xs, ps, flags, 0.0)
+
+
+def test_lanes_flag_a_diverged_env_and_leave_the_others():
+    xs, ps, flags = _batch([make_joint()] * 3)
+    xs[1, L.W_M] = np.nan
+    xs[2, L.W_O] = np.inf
+    out, bad = _run_lanes(xs, ps, flags, lambda k: 2.0, 3)
+    assert list(bad) == [False, True, True]
+    assert np.all(np.isfinite(out[0]))

@@ -422,6 +422,7 @@ _LN2_LO = 1.90821492927058770002e-10
 def _exp_neg(x: float) -> float:
     """exp(-x) for 0 <= x <= 40 (within 2 ulp of libm), in a form that vectorizes:
     exp(-x) = 2**-k exp(u), k = round(x / ln 2), |u| <= ln(2)/2, exp(u) by Taylor to u^13."""
+    # callers keep 0 <= x <= 40 (NaN mapped to 40): k indexes the table unchecked
     k = math.floor(x * 1.4426950408889634 + 0.5)
     u = (k * _LN2_HI - x) + k * _LN2_LO
     e = 1.0 + u * (1.0 + u * (1.0 / 2.0 + u * (1.0 / 6.0 + u * (1.0 / 24.0 + u * (
@@ -445,7 +446,7 @@ def _stribeck(w: np.ndarray, nl: int) -> None:
             # exp(-40) < 5e-18: the hump is gone far above the Stribeck speed
             on = _g(w, at + F_STRIB, j) != 0.0 and v != 0.0 and r2 < 40.0
             fc = _g(w, at + F_FC, j)
-            hump = fc + (_g(w, at + F_FS, j) - fc) * _exp_neg(min(r2, 40.0))
+            hump = fc + (_g(w, at + F_FS, j) - fc) * _exp_neg(r2 if r2 < 40.0 else 40.0)
             _s(w, lvl, j, hump if on else _g(w, lvl, j))
 
 
