@@ -137,8 +137,8 @@ ICMD = _rows()  # inputs of the call
 TEXT = _rows()
 BAD = _rows()
 # temporaries of one substep
-(T_KE, T_DKE, T_DTH, T_GEAR, T_DDTH, T_DINC, T_TH, T_DISS, T_TK, T_LIN, T_LOUT, T_DM,
- T_DO, T_TM, T_D) = (_rows() for _ in range(15))
+(T_KE, T_DKE, T_DTH, T_GEAR, T_DDTH, T_DINC, T_TH, T_DISS, T_LIN, T_LOUT, T_DM, T_DO,
+ T_D) = (_rows() for _ in range(13))
 #: fields per env
 N_FIELDS = _n
 #: substeps between exact recomputations of the rotated phases
@@ -433,24 +433,6 @@ def _exp_neg(x: float) -> float:
 
 
 @_inl
-def _stribeck(w: np.ndarray, nl: int) -> None:
-    """Stribeck levels: ``fc + (fs - fc) exp(-(v/v_s)^2)`` on sides that have it."""
-    for side in range(2):
-        at = SIDE[side]
-        lvl = T_LIN if side == 0 else T_LOUT
-        speed = L.W_M if side == 0 else L.W_O
-        for j in range(nl):
-            v = _g(w, speed, j)
-            r = v / _g(w, at + F_WS, j)
-            r2 = r * r
-            # exp(-40) < 5e-18: the hump is gone far above the Stribeck speed
-            on = _g(w, at + F_STRIB, j) != 0.0 and v != 0.0 and r2 < 40.0
-            fc = _g(w, at + F_FC, j)
-            hump = fc + (_g(w, at + F_FS, j) - fc) * _exp_neg(r2 if r2 < 40.0 else 40.0)
-            _s(w, lvl, j, hump if on else _g(w, lvl, j))
-
-
-@_inl
 def _torsion(w: np.ndarray, nl: int, nke: int) -> None:
     for j in range(nl):
         _s(w, T_KE, j, 0.0)
@@ -494,16 +476,47 @@ def _maxwell(w: np.ndarray, nl: int, nslip: int) -> None:
 
 
 @_inl
-def _drive(w: np.ndarray, nl: int) -> None:
-    """Transmitted torque, amplifier and current loop, Coulomb levels."""
+def _ripple_sums(w: np.ndarray, nl: int, nrin: int, nrout: int) -> None:
+    """Position-dependent friction of each side, summed over its ripples, into T_LIN/T_LOUT."""
+    for side in range(2):
+        at = SIDE[side] + F_RA
+        out = T_LIN if side == 0 else T_LOUT
+        for j in range(nl):
+            _s(w, out, j, 0.0)
+        for k in range(nrin if side == 0 else nrout):
+            for j in range(nl):
+                _s(w, out, j, _g(w, out, j) + _g(w, at + k, j) * _g(w, SIN + P_RIP[side] + k, j))
+
+
+@_inl
+def _level(w: np.ndarray, at: int, j: int, v: float, ripple: float) -> float:
+    """Coulomb-type level of one side at speed ``v`` (0: stuck) before the load term:
+    Coulomb or breakaway, the Stribeck hump, plus the ripple sum."""
+    fc = _g(w, at + F_FC, j)
+    stuck = _g(w, at + F_STUCK, j)  # loaded before the select: a conditional load
+    base = stuck if v == 0.0 else fc  # would keep the loop from vectorizing
+    r = v / _g(w, at + F_WS, j)
+    r2 = r * r
+    # exp(-40) < 5e-18: the hump is gone far above the Stribeck speed
+    on = _g(w, at + F_STRIB, j) != 0.0 and v != 0.0 and r2 < 40.0
+    hump = fc + (_g(w, at + F_FS, j) - fc) * _exp_neg(r2 if r2 < 40.0 else 40.0)
+    return (hump if on else base) + ripple
+
+
+@_inl
+def _drive_and_move(w: np.ndarray, nl: int) -> None:
+    """Transmitted torque, amplifier and current loop, friction, new speeds and
+    angles, energy bookkeeping: one pass, so the temporaries stay in registers."""
     a_in = SIDE[0]
     a_out = SIDE[1]
     for j in range(nl):
+        # --- transmitted torque
         t_k = _spring(w, j, _g(w, T_DTH, j)) + _g(w, CDAMP, j) * _g(w, T_DDTH, j) \
             + _g(w, T_TH, j)
-        _s(w, T_TK, j, t_k)
         _s(w, L.TK, j, t_k)
+        # --- amplifier and current loop
         w_m = _g(w, L.W_M, j)
+        w_o = _g(w, L.W_O, j)
         imax = _g(w, IMAX, j)
         i_t = _g(w, ICMD, j)
         i_t = imax if i_t > imax else (-imax if i_t < -imax else i_t)
@@ -516,50 +529,24 @@ def _drive(w: np.ndarray, nl: int) -> None:
         cur = cur + _g(w, ALPHA, j) * (i_t - cur)
         _s(w, L.CUR, j, cur)
         t_m = _g(w, KT, j) * cur
-        _s(w, T_TM, j, t_m)
         _s(w, L.T_MOTOR, j, t_m)
-        # both loads first, then a select (a load under a condition blocks vectorizing)
-        stuck_in = _g(w, a_in + F_STUCK, j)
-        fc_in = _g(w, a_in + F_FC, j)
-        stuck_out = _g(w, a_out + F_STUCK, j)
-        fc_out = _g(w, a_out + F_FC, j)
-        _s(w, T_LIN, j, stuck_in if w_m == 0.0 else fc_in)
-        _s(w, T_LOUT, j, stuck_out if _g(w, L.W_O, j) == 0.0 else fc_out)
-
-
-@_inl
-def _ripples(w: np.ndarray, nl: int, side: int, nrip: int) -> None:
-    at = SIDE[side] + F_RA
-    lvl = T_LIN if side == 0 else T_LOUT
-    for k in range(nrip):
-        for j in range(nl):
-            _s(w, lvl, j, _g(w, lvl, j) + _g(w, at + k, j) * _g(w, SIN + P_RIP[side] + k, j))
-
-
-@_inl
-def _move(w: np.ndarray, nl: int) -> None:
-    """Speeds (friction, viscous), angles and energy bookkeeping."""
-    a_in = SIDE[0]
-    a_out = SIDE[1]
-    for j in range(nl):
-        dt = _g(w, DT, j)
-        t_k = _g(w, T_TK, j)
-        t_m = _g(w, T_TM, j)
-        w_m = _g(w, L.W_M, j)
-        w_o = _g(w, L.W_O, j)
-        lvl = _g(w, T_LIN, j) + 0.0
+        # --- motor side
+        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
         lvl = lvl if lvl > 0.0 else 0.0
         w_m_new, pm = _advance(w_m, t_m - t_k * _g(w, T_GEAR, j), _g(w, H_M, j),
                                _visc(w, a_in, j, w_m), lvl)
+        # --- output side
         t_load = _g(w, LOAD0, j) + _g(w, TEXT, j)
         t_load = t_load + _g(w, GRAV, j) * _g(w, SIN + P_GRAV, j)
-        lvl = _g(w, T_LOUT, j) + _g(w, MU, j) * abs(t_k)
+        lvl = _level(w, a_out, j, w_o, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
         lvl = lvl if lvl > 0.0 else 0.0
         w_o_new, po = _advance(w_o, t_k - t_load, _g(w, H_O, j), _visc(w, a_out, j, w_o), lvl)
         locked = _g(w, LOCK, j) != 0.0
         w_o_new = 0.0 if locked else w_o_new
         po = 0.0 if locked else po
         _s(w, L.T_LOAD, j, t_load)
+        # --- angles and bookkeeping
+        dt = _g(w, DT, j)
         d_m = dt * w_m_new
         d_o = dt * w_o_new
         _s(w, T_DM, j, d_m)
@@ -626,11 +613,8 @@ def run_block(w: np.ndarray, nl: int, n_sub: int) -> None:
         _maxwell(w, nl, nslip)
         if any_tanh:
             _tanh_hysteresis(w, nl)
-        _drive(w, nl)
-        _stribeck(w, nl)
-        _ripples(w, nl, 0, nrin)
-        _ripples(w, nl, 1, nrout)
-        _move(w, nl)
+        _ripple_sums(w, nl, nrin, nrout)
+        _drive_and_move(w, nl)
         _phases(w, nl, nke, nrin, nrout, grav)
     for j in range(nl):
         _s(w, COUNT, j, _g(w, COUNT, j) + n_sub)
