@@ -484,10 +484,10 @@ def step_serial(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.nda
         bad[e] = _bad(xs[e])
 
 
-#: batch size from which the threaded step beats one thread (measured on 2 cores with
-#: the work-queue layer: serial 1.13M vs threaded 1.14M env-steps/s at 512 envs,
-#: 1.13M vs 1.31M at 1,024; below 512 the launch overhead dominates)
-PARALLEL_THRESHOLD = 1024
+#: batch size from which the threaded step beats one thread (with the TBB layer on
+#: 2 cores: serial 37 vs threaded 29 us per step at 64 envs, 146 vs 91 at 256;
+#: batches of many envs are faster still in :mod:`hdgym.physics.lanes`)
+PARALLEL_THRESHOLD = 64
 
 
 def step_for(n_envs: int):
