@@ -17,6 +17,12 @@ One substep is semi-implicit (symplectic) Euler on the two-inertia joint:
 Energy bookkeeping (dissipated energy, motor and load work) rides in the
 state so tests can close the energy balance. The plain-numpy twin of this
 step is :mod:`hdgym.physics.reference`.
+
+This module steps one env at a time (single trajectories: the Simulator,
+the discrepancy fits, closed loops); the kinematic-error, ripple and
+gravity phases are computed exactly once per call and rotated by each
+substep's angle increment. Batches of envs run the same step in SIMD lanes,
+:mod:`hdgym.physics.lanes`.
 """
 
 from __future__ import annotations
@@ -189,16 +195,21 @@ SCRATCH = 2 * N_PHASES
 
 
 @_inl
+def sincos_small(d: float) -> tuple[float, float]:
+    """sin and cos of |d| < 0.3 (Taylor to d^13 / d^14: truncation below 3e-17)."""
+    z = d * d
+    sd = d * (1.0 + z * (-1.0 / 6.0 + z * (1.0 / 120.0 + z * (
+        -1.0 / 5040.0 + z * (1.0 / 362880.0 + z * (-1.0 / 39916800.0 + z / 6227020800.0))))))
+    cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (
+        1.0 / 40320.0 + z * (-1.0 / 3628800.0 + z / 479001600.0)))))
+    return sd, cd
+
+
+@_inl
 def _rotate(trig: np.ndarray, j: int, d: float) -> None:
     """Advance phase ``j`` of ``trig`` (sines, then cosines) by ``d`` rad."""
     if abs(d) < 0.3:
-        # Taylor to d^13 / d^14: truncation below 3e-17 for |d| < 0.3
-        z = d * d
-        sd = d * (1.0 + z * (-1.0 / 6.0 + z * (1.0 / 120.0 + z * (
-            -1.0 / 5040.0 + z * (1.0 / 362880.0 + z * (-1.0 / 39916800.0
-                                                         + z / 6227020800.0))))))
-        cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (
-            1.0 / 40320.0 + z * (-1.0 / 3628800.0 + z / 479001600.0)))))
+        sd, cd = sincos_small(d)
     else:
         sd = math.sin(d)
         cd = math.cos(d)

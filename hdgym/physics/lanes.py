@@ -48,6 +48,7 @@ from hdgym.physics.kernel import (
     STICK,
     STRIB,
     VISC,
+    sincos_small,
 )
 
 # error_model="numpy": a division by zero in a lane whose result is discarded
@@ -278,17 +279,6 @@ def _sync_lane(w: np.ndarray, j: int) -> None:
 
 
 @_inl
-def _sincos_small(d: float) -> tuple[float, float]:
-    """sin and cos of |d| < 0.3 (Taylor to d^13 / d^14: truncation below 3e-17)."""
-    z = d * d
-    sd = d * (1.0 + z * (-1.0 / 6.0 + z * (1.0 / 120.0 + z * (
-        -1.0 / 5040.0 + z * (1.0 / 362880.0 + z * (-1.0 / 39916800.0 + z / 6227020800.0))))))
-    cd = 1.0 + z * (-0.5 + z * (1.0 / 24.0 + z * (-1.0 / 720.0 + z * (
-        1.0 / 40320.0 + z * (-1.0 / 3628800.0 + z / 479001600.0)))))
-    return sd, cd
-
-
-@_inl
 def _sincos_tiny(d: float) -> tuple[float, float]:
     """sin and cos of |d| < 0.05 (Taylor to d^9 / d^10: truncation below 2e-22)."""
     z = d * d
@@ -317,7 +307,7 @@ def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
             _s(w, COS + ph, j, c * cd - s * sd)
     elif big == 0:
         for j in range(nl):
-            sd, cd = _sincos_small(_g(w, T_D, j))
+            sd, cd = sincos_small(_g(w, T_D, j))
             s = _g(w, SIN + ph, j)
             c = _g(w, COS + ph, j)
             _s(w, SIN + ph, j, s * cd + c * sd)
@@ -326,7 +316,7 @@ def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
         for j in range(nl):  # coarse substeps or very fast motors
             d = _g(w, T_D, j)
             if abs(d) < 0.3:
-                sd, cd = _sincos_small(d)
+                sd, cd = sincos_small(d)
             else:
                 sd = math.sin(d)
                 cd = math.cos(d)
