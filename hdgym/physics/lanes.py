@@ -47,7 +47,7 @@ from hdgym.physics.kernel import (
     REVERSAL_DEADBAND,
     STICK,
     STRIB,
-    VISC,
+    _visc_consts,
     sincos_small,
 )
 
@@ -226,20 +226,10 @@ def _prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) -
         _s(w, at + F_STRIB, j, 1.0 if (coul and (flags & STRIB)) else 0.0)
         _s(w, at + F_FS, j, p[base + L.F_FS])
         _s(w, at + F_WS, j, p[base + L.F_WS])
-        b1 = 0.0
-        b2 = 0.0
-        pk2 = np.inf
-        fpk = 0.0
-        if flags & VISC:
-            b1 = p[base + L.F_B1]
-            b2 = p[base + L.F_B2]
-            if b2 < 0.0:  # b1 w + b2 w^3 is capped at its peak
-                pk2 = b1 / (-3.0 * b2)
-                wpk = math.sqrt(pk2)
-                fpk = b1 * wpk + b2 * pk2 * wpk
+        mode, b1, b2, pk2, fpk = _visc_consts(p, base, flags)
         _s(w, at + F_B1, j, b1)
         _s(w, at + F_B2, j, b2)
-        _s(w, at + F_PK2, j, pk2)
+        _s(w, at + F_PK2, j, pk2 if mode == 3 else np.inf)  # only mode 3 is capped
         _s(w, at + F_FPK, j, fpk)
         nrip = int(p[base + L.F_NRIP]) if (flags & POSDEP) else 0
         _s(w, NRIP_IN if side == 0 else NRIP_OUT, j, nrip)
