@@ -176,7 +176,7 @@ def _friction_level(p: np.ndarray, base: int, w: float, th_in: float, th_out: fl
 @_jit
 def _viscous_coeff(p: np.ndarray, base: int, w: float, flags: int) -> float:
     """Secant viscous coefficient f(w)/w >= 0 of ``b1 w + b2 w^3`` clamped at its peak."""
-    mode, b1, b2, wpk2, fpk = _visc_consts(p, base, flags)
+    mode, b1, b2, wpk2, fpk = viscous_constants(p, base, flags)
     return _visc(mode, b1, b2, wpk2, fpk, w)
 
 
@@ -256,7 +256,7 @@ def _level(p: np.ndarray, base: int, w: float, extra: float, flags: int, trig: n
 
 
 @_jit
-def _visc_consts(p: np.ndarray, base: int, flags: int) -> tuple[int, float, float, float, float]:
+def viscous_constants(p: np.ndarray, base: int, flags: int) -> tuple[int, float, float, float, float]:
     """(mode, b1, b2, w_pk^2, f(w_pk)) of one side; mode 0 off, 1 linear, 2 cubic, 3 capped."""
     if not (flags & VISC):
         return 0, 0.0, 0.0, 0.0, 0.0
@@ -273,7 +273,7 @@ def _visc_consts(p: np.ndarray, base: int, flags: int) -> tuple[int, float, floa
 
 @_inl
 def _visc(mode: int, b1: float, b2: float, wpk2: float, fpk: float, w: float) -> float:
-    """:func:`_viscous_coeff` from the constants of :func:`_visc_consts`."""
+    """:func:`_viscous_coeff` from the constants of :func:`viscous_constants`."""
     if mode <= 1:
         return b1
     w2 = w * w
@@ -321,8 +321,8 @@ def substeps_with(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: 
     cdamp = p[CDAMP]
     grav = p[GRAV]
     t_load0 = p[LOAD_T] + t_ext
-    vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk = _visc_consts(p, FIN, flags)
-    vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk = _visc_consts(p, FOUT, flags)
+    vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk = viscous_constants(p, FIN, flags)
+    vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk = viscous_constants(p, FOUT, flags)
     th_m = x[TH_M]
     th_o = x[TH_O]
     for k in range(nke):

@@ -47,8 +47,8 @@ from hdgym.physics.kernel import (
     REVERSAL_DEADBAND,
     STICK,
     STRIB,
-    _visc_consts,
     sincos_small,
+    viscous_constants,
 )
 
 # error_model="numpy": a division by zero in a lane whose result is discarded
@@ -226,7 +226,7 @@ def _prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) -
         _s(w, at + F_STRIB, j, 1.0 if (coul and (flags & STRIB)) else 0.0)
         _s(w, at + F_FS, j, p[base + L.F_FS])
         _s(w, at + F_WS, j, p[base + L.F_WS])
-        mode, b1, b2, pk2, fpk = _visc_consts(p, base, flags)
+        mode, b1, b2, pk2, fpk = viscous_constants(p, base, flags)
         _s(w, at + F_B1, j, b1)
         _s(w, at + F_B2, j, b2)
         _s(w, at + F_PK2, j, pk2 if mode == 3 else np.inf)  # only mode 3 is capped
