@@ -256,7 +256,8 @@ def _level(p: np.ndarray, base: int, w: float, extra: float, flags: int, trig: n
 
 
 @_jit
-def viscous_constants(p: np.ndarray, base: int, flags: int) -> tuple[int, float, float, float, float]:
+def viscous_constants(p: np.ndarray, base: int,
+                      flags: int) -> tuple[int, float, float, float, float]:
     """(mode, b1, b2, w_pk^2, f(w_pk)) of one side; mode 0 off, 1 linear, 2 cubic, 3 capped."""
     if not (flags & VISC):
         return 0, 0.0, 0.0, 0.0, 0.0
