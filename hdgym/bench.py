@@ -30,7 +30,7 @@ def _bare_loop(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndar
     for e in nb.prange(xs.shape[0]):
         trig = np.empty(kernel.SCRATCH)
         for _ in range(n_steps):
-            kernel.substeps_with(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
+            kernel.substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
 
 
 def best_rate(fn: Callable[[], None], units: float, repeats: int = 3) -> float:

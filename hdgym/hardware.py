@@ -5,8 +5,8 @@ every physics substep, so they live in the compiled step
 (:mod:`hdgym.physics.kernel`, effect ``amplifier_saturation``). This module
 holds what happens once per control period:
 
-* :func:`action_to_current`: a normalized action in [-1, 1] to a current
-  command in A (values outside saturate at the amplifier limit);
+* :func:`scale_actions`: normalized actions in [-1, 1] to current
+  commands in A, for a batch (values outside saturate at the amplifier limit);
 * :class:`SensorBank`: quantized input and output encoders, velocity
   estimated from counts, optional torque sensor, measurement noise and an
   optional one-sample delay, for a batch of joints.
@@ -28,19 +28,6 @@ CHANNELS = (
 )
 
 
-def action_to_current(action: np.ndarray, current_limit: np.ndarray | float) -> np.ndarray:
-    """Map a normalized action to a current command, A.
-
-    ``action = 1`` asks for the amplifier's full current; larger values ask
-    for more and are clipped by the amplifier exactly like an analog
-    command beyond its range. NaN or infinite actions raise ``ValueError``.
-    """
-    action = np.asarray(action, dtype=float)
-    if not np.all(np.isfinite(action)):
-        raise ValueError(f"action must be finite, got {action!r}")
-    return np.clip(action, -1.0, 1.0) * current_limit
-
-
 @nb.njit(cache=True)
 def _scale_actions(a: np.ndarray, limit: np.ndarray, clipped: np.ndarray,
                    current: np.ndarray) -> int:
@@ -56,11 +43,14 @@ def _scale_actions(a: np.ndarray, limit: np.ndarray, clipped: np.ndarray,
 
 def scale_actions(actions: np.ndarray, current_limit: np.ndarray, clipped: np.ndarray,
                   current: np.ndarray) -> None:
-    """:func:`action_to_current` for a batch, into preallocated arrays.
+    """Map normalized actions to current commands, into preallocated arrays.
 
-    ``clipped`` receives the actions clipped to [-1, 1], ``current`` the
-    current commands (A) for per-env limits ``current_limit``. A NaN or
-    infinite action raises ``ValueError`` naming the env.
+    ``action = 1`` asks for the amplifier's full current; larger values ask
+    for more and are clipped by the amplifier exactly like an analog command
+    beyond its range. ``clipped`` receives the actions clipped to [-1, 1],
+    ``current`` the current commands (A) for per-env limits
+    ``current_limit``. A NaN or infinite action raises ``ValueError`` naming
+    the env.
     """
     bad = _scale_actions(actions, current_limit, clipped, current)
     if bad >= 0:

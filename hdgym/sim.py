@@ -178,8 +178,7 @@ class Simulator:
                 raise ValueError(f"controller returned {cmd!r} at t = {t[k]:.6g} s")
             u[k] = cmd
             if k + 1 < t.size:
-                kernel.substeps_with(x, self.row, cmd, tl[k], dt, self.n_substeps, self.flags,
-                                     trig)
+                kernel.substeps(x, self.row, cmd, tl[k], dt, self.n_substeps, self.flags, trig)
                 if kernel._bad(x):
                     raise SimulationError(diverged_message(x, k, self.ctrl_dt))
                 reading = bank.measure(xs)

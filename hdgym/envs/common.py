@@ -259,7 +259,7 @@ class JointBatch:
         if not self.noise:
             return self.zeros2 if idx is None else np.zeros((len(idx), 2))
         ptr = self.noise_ptr
-        if idx is None and ptr[0] < NOISE_BLOCK and ptr[0] == ptr[-1] and (ptr == ptr[0]).all():
+        if idx is None and ptr[0] < NOISE_BLOCK and (ptr == ptr[0]).all():
             # the usual step: every env at the same sample, so a view does
             z = self.noise_buf[:, ptr[0], :]
             ptr += 1
@@ -339,7 +339,7 @@ def action_space() -> spaces.Box:
 def scalar_action(action: Any) -> float:
     """The single env's action as a float clipped to [-1, 1].
 
-    Same numbers as :func:`hdgym.hardware.action_to_current` (which the
+    Same numbers as :func:`hdgym.hardware.scale_actions` (which the
     vector env calls): NaN/inf raise ``ValueError``, values beyond +-1
     saturate like the amplifier.
     """

@@ -74,14 +74,11 @@ class HarmonicDriveVectorEnv(VectorEnv):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or "
                              f"None, got {render_mode!r}")
-        modes = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP,
-                 AutoresetMode.NEXT_STEP: AutoresetMode.NEXT_STEP,
-                 AutoresetMode.SAME_STEP: AutoresetMode.SAME_STEP}
-        key = autoreset_mode
-        if isinstance(key, str) and not isinstance(key, AutoresetMode):
-            key = key.lower()
-        mode = modes.get(key)
-        if mode is None:
+        mode = autoreset_mode
+        if isinstance(mode, str):
+            mode = {"next_step": AutoresetMode.NEXT_STEP,
+                    "same_step": AutoresetMode.SAME_STEP}.get(mode.lower(), mode)
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError(f"autoreset_mode must be 'next_step' or 'same_step' (or the "
                              f"AutoresetMode), got {autoreset_mode!r}")
         self.metadata = {**self.metadata, "autoreset_mode": mode}
@@ -159,15 +156,14 @@ class HarmonicDriveVectorEnv(VectorEnv):
         ended = term | trunc
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             self.prev_done = ended
-            return b.obs.copy(), rew, term, trunc, self._info()
-        if not ended.any():
-            return b.obs.copy(), rew, term, trunc, self._info()
-        final_obs, final_info = b.obs.copy(), self._info()
-        b.restart(ended)
-        info = self._info()
-        info["final_obs"], info["_final_obs"] = final_obs, ended
-        info["final_info"], info["_final_info"] = final_info, ended
-        return b.obs.copy(), rew, term, trunc, info
+        elif ended.any():  # SAME_STEP: the ended envs start over within this step
+            final_obs, final_info = b.obs.copy(), self._info()
+            b.restart(ended)
+            info = self._info()
+            info["final_obs"], info["_final_obs"] = final_obs, ended
+            info["final_info"], info["_final_info"] = final_info, ended
+            return b.obs.copy(), rew, term, trunc, info
+        return b.obs.copy(), rew, term, trunc, self._info()
 
     def render(self) -> np.ndarray | None:
         """A frame of env 0 (``render_mode="rgb_array"``)."""

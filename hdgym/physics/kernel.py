@@ -300,9 +300,15 @@ def _advance(w: float, tau: float, h: float, visc: float, level: float) -> tuple
 
 
 @_jit
-def substeps_with(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
-                  n_sub: int, flags: int, trig: np.ndarray) -> None:
-    """:func:`substeps` with caller-owned scratch ``trig`` (:data:`SCRATCH` floats)."""
+def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
+             n_sub: int, flags: int, trig: np.ndarray) -> None:
+    """Advance one env's state ``x`` in place by ``n_sub`` substeps of ``dt`` s.
+
+    ``i_cmd`` is the current command (A); ``t_ext`` an external load torque
+    (N m, resisting positive output motion) added to the preset's load.
+    ``trig`` is the caller's scratch of :data:`SCRATCH` floats (the phases'
+    sin and cos), reused from call to call.
+    """
     r = p[RATIO]
     inv_r = 1.0 / r
     h_m = dt / p[J_M]
@@ -451,18 +457,6 @@ def substeps_with(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: 
 
 
 @_jit
-def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float,
-             n_sub: int, flags: int) -> None:
-    """Advance one env's state ``x`` in place by ``n_sub`` substeps of ``dt`` s.
-
-    ``i_cmd`` is the current command (A); ``t_ext`` an external load torque
-    (N m, resisting positive output motion) added to the preset's load.
-    Batched callers should use :func:`substeps_with` and reuse the scratch.
-    """
-    substeps_with(x, p, i_cmd, t_ext, dt, n_sub, flags, np.empty(SCRATCH))
-
-
-@_jit
 def _bad(x: np.ndarray) -> bool:
     for k in range(x.shape[0]):
         if not math.isfinite(x[k]):
@@ -482,7 +476,7 @@ def step_parallel(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.n
     for c in nb.prange((n + _CHUNK - 1) // _CHUNK):
         trig = np.empty(SCRATCH)
         for e in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
-            substeps_with(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
+            substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
             bad[e] = _bad(xs[e])
 
 
@@ -492,7 +486,7 @@ def step_serial(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.nda
     """Same as :func:`step_parallel` on one thread (cheaper for small batches)."""
     trig = np.empty(SCRATCH)
     for e in range(xs.shape[0]):
-        substeps_with(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
+        substeps(xs[e], ps[e], i_cmd[e], t_ext[e], dt, n_sub, flags[e], trig)
         bad[e] = _bad(xs[e])
 
 
@@ -517,7 +511,7 @@ def run_open_loop(x: np.ndarray, p: np.ndarray, i_cmd: np.ndarray, t_ext: np.nda
     """
     trig = np.empty(SCRATCH)
     for k in range(i_cmd.shape[0]):
-        substeps_with(x, p, i_cmd[k], t_ext[k], dt, n_sub, flags, trig)
+        substeps(x, p, i_cmd[k], t_ext[k], dt, n_sub, flags, trig)
         for j in range(N_STATE):
             out[k, j] = x[j]
         if _bad(x):
