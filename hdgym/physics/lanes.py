@@ -280,6 +280,15 @@ def _sincos_tiny(d: float) -> tuple[float, float]:
 
 
 @_inl
+def _turn(w: np.ndarray, ph: int, j: int, sd: float, cd: float) -> None:
+    """Rotate phase ``ph`` of lane ``j`` by the angle whose sine and cosine are given."""
+    s = _g(w, SIN + ph, j)
+    c = _g(w, COS + ph, j)
+    _s(w, SIN + ph, j, s * cd + c * sd)
+    _s(w, COS + ph, j, c * cd - s * sd)
+
+
+@_inl
 def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
     """Rotate phase ``ph`` of every lane by its increment in field T_D."""
     mid = 0
@@ -291,17 +300,11 @@ def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
     if mid == 0:  # the usual case at 10 substeps per ms: a short series, vectorized
         for j in range(nl):
             sd, cd = _sincos_tiny(_g(w, T_D, j))
-            s = _g(w, SIN + ph, j)
-            c = _g(w, COS + ph, j)
-            _s(w, SIN + ph, j, s * cd + c * sd)
-            _s(w, COS + ph, j, c * cd - s * sd)
+            _turn(w, ph, j, sd, cd)
     elif big == 0:
         for j in range(nl):
             sd, cd = sincos_small(_g(w, T_D, j))
-            s = _g(w, SIN + ph, j)
-            c = _g(w, COS + ph, j)
-            _s(w, SIN + ph, j, s * cd + c * sd)
-            _s(w, COS + ph, j, c * cd - s * sd)
+            _turn(w, ph, j, sd, cd)
     else:
         for j in range(nl):  # coarse substeps or very fast motors
             d = _g(w, T_D, j)
@@ -310,10 +313,7 @@ def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
             else:
                 sd = math.sin(d)
                 cd = math.cos(d)
-            s = _g(w, SIN + ph, j)
-            c = _g(w, COS + ph, j)
-            _s(w, SIN + ph, j, s * cd + c * sd)
-            _s(w, COS + ph, j, c * cd - s * sd)
+            _turn(w, ph, j, sd, cd)
 
 
 @_inl
