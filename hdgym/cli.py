@@ -83,9 +83,7 @@ def cmd_numerics(args: argparse.Namespace) -> int:
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from hdgym import reproduce
 
-    if args.what != "tuttle":
-        raise ValueError(f"reproduce: unknown study {args.what!r}; known: tuttle")
-    ok = reproduce.tuttle(Path(args.out), quick=args.quick)
+    ok = reproduce.run(args.what, Path(args.out), quick=args.quick)
     print(f"wrote {args.out}/fidelity.md")
     return 0 if ok else 1
 
@@ -179,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(fn=cmd_numerics)
 
     sp = sub.add_parser("reproduce", help="reproduce published measurements")
-    sp.add_argument("what", choices=["tuttle"])
+    sp.add_argument("what", choices=["tuttle", "seyfferth", "all"])
     sp.add_argument("--quick", action="store_true")
     sp.add_argument("--out", default="results/fidelity")
     sp.set_defaults(fn=cmd_reproduce)
