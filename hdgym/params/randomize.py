@@ -9,17 +9,25 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
-
-if TYPE_CHECKING:
-    from hdgym.params.joint import JointParams
+from typing import Any, Protocol, Self, TypeVar
 
 
-def perturb(p: JointParams, rng: Any, spreads: Mapping[str, float]) -> JointParams:
+class Settable(Protocol):
+    """What :func:`perturb` needs of a joint: dotted-path get and a validated set."""
+
+    def get(self, path: str) -> Any: ...
+
+    def set(self, path: str, value: Any) -> Self: ...
+
+
+J = TypeVar("J", bound=Settable)
+
+
+def perturb(p: J, rng: Any, spreads: Mapping[str, float]) -> J:
     """A copy of ``p`` with each numeric parameter scaled by ``1 + spread * U(-1, 1)``.
 
     Args:
-        p: the joint.
+        p: the joint (a :class:`~hdgym.params.JointParams`).
         rng: a seeded ``numpy.random.Generator``.
         spreads: relative spread per dotted parameter path (>= 0); a tuple
             parameter draws one factor per element.
