@@ -101,9 +101,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from hdgym import reproduce
 
     check_out(args.out, args.quick)
-    if args.what != "tuttle":
-        raise ValueError(f"reproduce: unknown study {args.what!r}; known: tuttle")
-    ok = reproduce.tuttle(Path(args.out), quick=args.quick)
+    ok = reproduce.run(args.what, Path(args.out), quick=args.quick)
     print(f"wrote {args.out}/fidelity.md")
     return 0 if ok else 1
 
@@ -283,7 +281,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("reproduce", help="reproduce published measurements",
                         description="Reproduce the published measurements of a study; writes "
                         "fidelity.md and figures to --out. Exit 1 if a check fails.")
-    sp.add_argument("what", choices=["tuttle"], help="the study")
+    sp.add_argument("what", choices=["tuttle", "seyfferth", "all"],
+                    help="the study (all: every study on one page)")
     sp.add_argument("--quick", action="store_true", help=QUICK_HELP)
     sp.add_argument("--out", default="runs/fidelity",
                     help="folder to write (default %(default)s; the committed pages are "
