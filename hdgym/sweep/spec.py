@@ -9,7 +9,7 @@ A spec (every key but ``presets``, ``scenarios`` and ``seeds`` is optional)::
     scenarios = ["current_steps", "locked_random"] # see hdgym.sweep.scenarios.scenario_names()
     seeds = 4                           # 0..3, or a list [0, 7, 11]
     quick = false                       # shorter runs in every scenario
-    summary_dir = "results/sweeps"      # also write <name>.md / <name>.png here
+    summary_dir = "runs/sweeps"         # also write <name>.md / <name>.png here
 
     [spreads]                           # relative, one uniform draw per path per job
     "compliance.stiffness" = 0.3        # stiffness * (1 + 0.3 U(-1, 1))
