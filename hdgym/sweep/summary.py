@@ -4,7 +4,7 @@ Per scenario, every metric is reduced to n / mean / std / min / max over the
 rows of each (preset, controller) group, i.e. over seeds, randomized drives
 and grid points together. Written to ``DIR/summary.md`` and
 ``DIR/summary.png``, and to ``<summary_dir>/<name>.md/.png`` when the spec
-sets ``summary_dir`` (the ready-made specs use ``results/sweeps``).
+sets ``summary_dir`` or ``hdgym sweep --summary-dir DIR`` asks for it.
 """
 
 from __future__ import annotations
