@@ -160,7 +160,8 @@ def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int, repeat
         ended = alive & (term | trunc)
         length[ended] = k + 1
         terminated |= ended & term
-        ttt[ended] = info["time_to_target"][ended]
+        ttt[ended] = np.where(info["time_to_target"][ended] >= 0,
+                                      info["time_to_target"][ended], np.nan)
         peak[ended] = info["peak_torque"][ended]
         ok[ended] = info["success"][ended] > 0.5
         alive &= ~ended

@@ -212,8 +212,27 @@ def default_grids(i_max: float, quick: bool = False) -> dict[str, list[dict[str,
     return g
 
 
+def ke_grid(base: Mapping[str, float], i_max: float,
+            quick: bool = False) -> list[dict[str, float]]:
+    """KE feedforward on top of one tuned point: ``base`` plus a 2x-order current ripple
+    of each amplitude (A) and phase in the grid (and amplitude 0, the base alone)."""
+    amps = (0.05 * i_max,) if quick else (0.025 * i_max, 0.05 * i_max, 0.1 * i_max)
+    phases = (0.0, math.pi) if quick else tuple(math.radians(p) for p in range(0, 360, 45))
+    pts = [{**base, "ke_amp": 0.0, "ke_phase": 0.0}]
+    pts += [{**base, "ke_amp": a, "ke_phase": p} for a in amps for p in phases]
+    return pts
+
+
+def label(name: str) -> str:
+    """Report name of a grid (``<grid>+ke``: that grid's pick with KE feedforward)."""
+    base, plus, _ = name.partition("+")
+    return FAMILY_LABELS.get(base, base) + (" + KE feedforward" if plus else "")
+
+
 def family_of(name: str) -> tuple[str, str]:
-    """(controller family, torsion source) of a grid name (``damp_full`` is ``damp``)."""
+    """(controller family, torsion source) of a grid name (``damp_full`` is ``damp``,
+    ``<grid>+ke`` is the grid's family)."""
+    name = name.partition("+")[0]
     if name in ("damp_full",):
         return "damp", "torque"
     if name == "damp_enc":

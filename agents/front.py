@@ -33,7 +33,7 @@ import gymnasium as gym
 import numpy as np
 
 from agents.common import env_kwargs, load_config
-from agents.families import FAMILY_LABELS, FamilyController, default_grids, family_of
+from agents.families import FamilyController, default_grids, family_of, ke_grid, label
 
 #: N m, the torque caps of the front
 CAPS = tuple(range(140, 401, 10))
@@ -87,7 +87,8 @@ def run_batch(cfg: Mapping[str, Any], controller: Any, seeds: Sequence[int],
         obs, _r, term, trunc, info = venv.step(action)
         ended = alive & (term | trunc)
         if ended.any():
-            ttt[ended] = info["time_to_target"][ended]
+            ttt[ended] = np.where(info["time_to_target"][ended] >= 0,
+                                      info["time_to_target"][ended], np.nan)
             peak[ended] = info["peak_torque"][ended]
             terminated[ended] = term[ended]
             alive &= ~ended
@@ -169,7 +170,7 @@ def tune_and_test(cfg: Mapping[str, Any], grids: Mapping[str, Sequence[Mapping[s
                             "train": float(s_tr.mean()), "test": float(s_te.mean()),
                             "ci": [lo, hi]})
             front.append(row)
-        fams[name] = {"label": FAMILY_LABELS.get(name, name), "grid_size": len(points),
+        fams[name] = {"label": label(name), "grid_size": len(points),
                       "front": front}
         if log:
             log(f"{name}: {len(points)} points x {len(train_seeds)} training episodes, "
@@ -179,6 +180,19 @@ def tune_and_test(cfg: Mapping[str, Any], grids: Mapping[str, Sequence[Mapping[s
             [int(train_seeds[0]), len(train_seeds)], "test_seeds": [int(test_seeds[0]),
                                                                     len(test_seeds)],
             "families": fams}
+
+
+def add_ke(cfg: Mapping[str, Any], front: dict[str, Any], cap: float, deadline: float,
+           i_max: float, train_seeds: Sequence[int], test_seeds: Sequence[int],
+           quick: bool = False, log: Any = None) -> str:
+    """Tune KE feedforward on top of the best family's pick at (cap, deadline); adds the
+    grid ``<family>+ke`` to ``front`` and returns its name."""
+    fam, entry = best_classical(front, cap, deadline)
+    name = f"{fam.partition('+')[0]}+ke"
+    more = tune_and_test(cfg, {name: ke_grid(entry["point"], i_max, quick)}, train_seeds,
+                         test_seeds, front["caps"], front["deadlines"], log)
+    front["families"][name] = more["families"][name]
+    return name
 
 
 def best_classical(front: Mapping[str, Any], cap: float, deadline: float
@@ -200,6 +214,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--train-seed", type=int, default=0)
     ap.add_argument("--test-seed", type=int, default=100_000)
     ap.add_argument("--families", nargs="+", help="grid names (default: all)")
+    ap.add_argument("--ke", nargs=2, type=float, metavar=("CAP", "DEADLINE"),
+                    help="also tune KE feedforward on the best pick at this cap (N m) and "
+                    "deadline (s)")
     ap.add_argument("--quick", action="store_true", help="small grids, 16/32 episodes")
     ap.add_argument("--out", type=Path, help="write the front here (.json)")
     args = ap.parse_args(argv)
@@ -229,6 +246,9 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("training and held-out seeds overlap")
         front = tune_and_test(cfg, grids, train_seeds, test_seeds,
                               log=lambda m: print(m, file=sys.stderr))
+        if args.ke:
+            add_ke(cfg, front, args.ke[0], args.ke[1], i_max, train_seeds, test_seeds,
+                   args.quick, log=lambda m: print(m, file=sys.stderr))
     except ValueError as exc:
         print(f"agents.front: {exc}", file=sys.stderr)
         return 2

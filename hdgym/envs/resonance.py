@@ -122,7 +122,7 @@ class HarmonicDriveResonanceEnv(HarmonicDriveEnv):
     ``info`` holds the true states (``motor_angle``, ``motor_velocity``,
     ``output_angle``, ``output_velocity``, ``motor_current``,
     ``output_torque``), ``time``, ``target_speed`` (rad/s),
-    ``torque_oscillation`` (N m, true), ``time_to_target`` (s, NaN until the
+    ``torque_oscillation`` (N m, true), ``time_to_target`` (s, -1 until the
     speed, filtered with 25 ms, is within 5 % of the target),
     ``peak_torque`` (N m so far), ``success`` and ``diverged``.
 

@@ -329,8 +329,8 @@ def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z:
     rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
     aux[i, 0] = wt
     aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
-    aux[i, 2] = ts[i, 3]
-    aux[i, 3] = ts[i, 4]
+    aux[i, 2] = ts[i, 3] if ts[i, 3] == ts[i, 3] else -1.0  # -1: not reached (info stays finite)
+    aux[i, 3] = ts[i, 4] if ts[i, 4] < math.inf else 1e30
     aux[i, 4] = 1.0 if (ts[i, 3] <= c[R_DEADLINE] and ts[i, 4] <= c[C_TLIM]) else 0.0
 
 
@@ -369,7 +369,7 @@ class ResonanceTask:
 
     "Reached": the true motor speed, filtered first-order with
     :data:`SPEED_FILTER_S`, comes within :data:`REACH_TOLERANCE` of the
-    target. ``info`` adds ``time_to_target`` (s, NaN until reached),
+    target. ``info`` adds ``time_to_target`` (s, -1 until reached),
     ``peak_torque`` (largest |flexspline torque| so far, N m) and
     ``success`` (1.0 when reached by the deadline with the peak within the
     env's ``torque_limit``, else 0.0; final at the episode's end).
