@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import residuals as R
-from .workflow import Diagnosis
+from .diagnosis import Diagnosis
 
 FIGURES = {
     "residual_time": "residual against time, before and after (per channel)",
