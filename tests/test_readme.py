@@ -143,15 +143,15 @@ def test_ci_runs_the_readme_test_command():
 
 
 def test_layout_section_matches_the_tree():
-    """Every top-level module and package of hdgym (and the other packages) is named."""
+    """The layout names every top-level module and package, and nothing that is gone."""
     layout = README[README.index("## Layout"):]
-    names = [f"{pkg}/" for pkg in ("hdgym", "controllers", "agents", "results", "docs", "tests")]
+    names = ["controllers/", "agents/", "results/", "docs/", "tests/"]
     for p in sorted((ROOT / "hdgym").iterdir()):
         if p.name.startswith(("_", ".")):
             continue
         if p.suffix == ".py" or (p.is_dir() and (p / "__init__.py").exists()):
-            names.append(p.stem if p.suffix == ".py" else f"{p.name}/")
+            names.append(f"hdgym/{p.name}" + ("/" if p.is_dir() else ""))
     missing = [n for n in names if n not in layout]
     assert not missing, f"README layout does not name {missing}"
-    for word in re.findall(r"hdgym/([\w/]+?\.py)", layout):  # and names nothing gone
-        assert (ROOT / "hdgym" / word).exists(), word
+    for path in re.findall(r"\b((?:hdgym|controllers|agents|docs)/[\w/.-]*)", layout):
+        assert (ROOT / path).exists(), f"README layout names {path}, which is not in the tree"
