@@ -35,7 +35,9 @@ from controllers.experiments import (
 )
 from controllers.figures import figures
 from controllers.report import markdown
-from hdgym.params import atomic_write_text, preset
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
+from hdgym.params import preset
 from hdgym.progress import bar, step
 
 
@@ -65,6 +67,7 @@ def run(out: Path, quick: bool = False) -> dict[str, Any]:
             step(b, f"{name} figures")
             results[name] = res
     text = markdown(results, quick, time.time() - t0, out)
+    text += moved_section(out / "controllers.md", text)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "controllers.md", text)
     return summary(results)

@@ -25,7 +25,9 @@ import numpy as np
 
 from hdgym import plugins
 from hdgym.effects import flags_of
-from hdgym.params import JointParams, atomic_write_text, preset
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
+from hdgym.params import JointParams, preset
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 from hdgym.physics.lanes import PARALLEL_THRESHOLD, LaneBatch
@@ -190,7 +192,9 @@ def write_report(tables: dict[str, list[dict]], path: Path, command: str,
                 f"{r.get('target', '')} | {'' if met is None else ('yes' if met else 'NO')} |")
         notes = [r["note"] for r in rows if r.get("note")]
         lines += [""] + [f"- {n}" for n in notes] + ([""] if notes else [])
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    text = "\n".join(lines) + "\n"
+    moved = moved_section(Path(path), text)
+    atomic_write_text(path, text + ("\n" + moved if moved else ""))
 
 
 def bench_soak(quick: bool = False) -> list[dict]:
