@@ -11,7 +11,7 @@ import pytest
 
 from hdgym.discrepancy import cases, experiments, realdata
 from hdgym.discrepancy.effect import Scales
-from hdgym.discrepancy.files import diagnose_files
+from hdgym.discrepancy.command import diagnose_files
 from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.discrepancy.registry import REGISTRY, model_params
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum

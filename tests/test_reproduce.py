@@ -11,6 +11,7 @@ from hdgym import reproduce as R
 from hdgym.identify import MaxwellSlipFit, fit_maxwell_slip, nmse, play_operator, stop_operator
 from hdgym.params import preset
 from hdgym.physics import layout as L
+from hdgym.reproduce import seyfferth, tuttle
 
 # ------------------------------------------------------------------ pure analysis functions
 
@@ -159,7 +160,7 @@ def test_step_table_batch_matches_single() -> None:
 def test_joint1_current_steps_plateau_and_model4_smooth() -> None:
     """(b): Tuttle's plateau near 8,000 deg/s with the tooth friction, none without."""
     p = preset("tuttle-joint1")
-    cur = np.array(R.STEP_CURRENTS)
+    cur = np.array(tuttle.STEP_CURRENTS)
     n = cur.size
     m, _ = R.step_table([p] * n + [p.without("load_dependent_friction")] * n,
                         np.concatenate([cur, cur]))
@@ -175,21 +176,21 @@ def test_joint1_current_steps_plateau_and_model4_smooth() -> None:
 
 def test_ke_spectrum_of_presets(tmp_path) -> None:
     """(a) through the same code as the page (quick run)."""
-    item = R.check_ke(tmp_path, quick=True)
+    item = tuttle.check_ke(tmp_path, quick=True)
     assert item.passed, item.measured
     assert (tmp_path / "ke_spectrum.png").exists()
 
 
 def test_resonance_loop_and_identification(tmp_path) -> None:
     """(c), (d), (e) quick runs pass."""
-    for check in (R.check_resonance, R.check_loop, R.check_identification):
+    for check in (tuttle.check_resonance, tuttle.check_loop, seyfferth.check_identification):
         item = check(tmp_path, quick=True)
         assert item.passed, item.measured
 
 
 @pytest.mark.slow
 def test_tuttle_page(tmp_path) -> None:
-    ok = R.tuttle(tmp_path, quick=True)
+    ok = R.run("tuttle", tmp_path, quick=True)
     text = (tmp_path / "fidelity.md").read_text()
     assert "hdgym reproduce tuttle" in text
     assert ok, text

@@ -13,7 +13,7 @@ Modules, one job each:
 * :mod:`.diagnosis` -- the outcome of a diagnosis (data only);
 * :mod:`.workflow` -- fit, localize, name, add, refit, repeat;
 * :mod:`.report` -- report.json + report.md + figures, written atomically;
-* :mod:`.files` -- ``hdgym diagnose``: read records, diagnose, write the report;
+* :mod:`.command` -- ``hdgym diagnose``: read records, diagnose, write the report;
 * :mod:`.experiments` -- identification protocols as command signals (``hdgym experiment``);
 * :mod:`.bench` -- timing of a diagnosis;
 * :mod:`.cases` -- hidden-effect cases (``python -m hdgym.discrepancy.cases``);
