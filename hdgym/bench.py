@@ -25,10 +25,13 @@ import numpy as np
 
 from hdgym import plugins
 from hdgym.effects import flags_of
-from hdgym.params import JointParams, atomic_write_text, preset
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
+from hdgym.params import JointParams, preset
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 from hdgym.physics.lanes import PARALLEL_THRESHOLD, LaneBatch
+from hdgym.progress import bar
 
 #: a bench section: ``fn(quick) -> rows`` (one dict per row, as :func:`write_report` reads)
 SectionFn = Callable[[bool], list[dict]]
@@ -189,7 +192,9 @@ def write_report(tables: dict[str, list[dict]], path: Path, command: str,
                 f"{r.get('target', '')} | {'' if met is None else ('yes' if met else 'NO')} |")
         notes = [r["note"] for r in rows if r.get("note")]
         lines += [""] + [f"- {n}" for n in notes] + ([""] if notes else [])
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    text = "\n".join(lines) + "\n"
+    moved = moved_section(Path(path), text)
+    atomic_write_text(path, text + ("\n" + moved if moved else ""))
 
 
 def bench_soak(quick: bool = False) -> list[dict]:
@@ -198,7 +203,7 @@ def bench_soak(quick: bool = False) -> list[dict]:
     from hdgym.params import preset_names
 
     rows = []
-    for name in preset_names():
+    for name in bar(preset_names(), "soak", unit="preset"):
         r = soak(preset(name), n_steps=100_000 if quick else 1_000_000)
         f, la = r["first"], r["last"]
         rows.append({
@@ -233,9 +238,9 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
         soak: bool = False) -> dict[str, list[dict]]:
     """Run every registered section and write the report (``soak`` adds the long soak runs)."""
     registered, failed = sections()
-    tables = {sec.title: sec.fn(quick) for sec in registered}
+    tables = {sec.title: sec.fn(quick) for sec in bar(registered, "bench", unit="section")}
     if soak:
         tables["Soak (issue: long runs)"] = bench_soak(quick)
     write_report(tables, out, "hdgym bench" + (" --quick" if quick else "")
-                 + (" --soak" if soak else ""), not_measured=failed)
+                 + (" --soak" if soak else "") + f" --out {out}", not_measured=failed)
     return tables

@@ -239,6 +239,9 @@ def test_local_sweep_writes_resumes_and_summarizes(tmp_path: Path, spec_file: Pa
 
     md = (out / "summary.md").read_text()
     assert "| tuttle-joint1 | – | torque_rms | 4 |" in md
+    # it replaced the first run's page, with the same rows: it says nothing moved
+    assert "## What moved since the previous run" in md
+    assert " 0 of " in md.partition("## What moved")[2].splitlines()[2]
     assert "Regenerate: `hdgym sweep" in md
     assert (out / "summary.png").stat().st_size > 10_000
 
