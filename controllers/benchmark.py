@@ -38,6 +38,7 @@ from controllers.report import markdown
 from hdgym.files import atomic_write_text
 from hdgym.page_changes import moved_section
 from hdgym.params import preset
+from hdgym.progress import bar, step
 
 
 def run(out: Path, quick: bool = False) -> dict[str, Any]:
@@ -50,16 +51,22 @@ def run(out: Path, quick: bool = False) -> dict[str, Any]:
     out = Path(out)
     cfg = settings(quick)
     results: dict[str, Any] = {}
-    for name in JOINTS:
-        p = preset(name)
-        res = {"cfg": cfg, "primary": PRIMARY[name],
-               "tracking": {rev: tracking(p, cfg, rev, sweep_too=rev == PRIMARY[name])
-                            for rev in SPEEDS},
-               "load_step": load_step(p, cfg), "point_to_point": point_to_point(p, cfg),
-               "bode": bode(p, cfg)}
-        res["figures"] = figures(name, res, out / "controllers")
-        results[name] = res
-    text = markdown(results, quick, time.time() - t0)
+    with bar(total=len(JOINTS) * (len(SPEEDS) + 4), desc="controllers", unit="run") as b:
+        for name in JOINTS:
+            p = preset(name)
+            track = {}
+            for rev in SPEEDS:
+                track[rev] = tracking(p, cfg, rev, sweep_too=rev == PRIMARY[name])
+                step(b, f"{name} tracking")
+            res = {"cfg": cfg, "primary": PRIMARY[name], "tracking": track}
+            for key, fn in (("load_step", load_step), ("point_to_point", point_to_point),
+                            ("bode", bode)):
+                res[key] = fn(p, cfg)
+                step(b, f"{name} {key}")
+            res["figures"] = figures(name, res, out / "controllers")
+            step(b, f"{name} figures")
+            results[name] = res
+    text = markdown(results, quick, time.time() - t0, out)
     text += moved_section(out / "controllers.md", text)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "controllers.md", text)

@@ -14,14 +14,16 @@ def _verdict(value: float, target: float) -> str:
     return "met" if value >= target else "**not met**"
 
 
-def markdown(results: dict[str, Any], quick: bool, elapsed: float) -> str:
-    """The page: targets, then per joint the tables and figures; ``elapsed`` run time, s."""
+def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = None) -> str:
+    """The page: targets, then per joint the tables and figures; ``elapsed`` run time, s;
+    ``out`` the output folder the command was given."""
     as_ = 180 / math.pi * 3600
     cmd = "hdgym controllers --quick" if quick else "hdgym controllers"
+    cmd += f" --out {out}" if out is not None else ""
     lines = [
         "# Controller benchmark",
         "",
-        f"Regenerate with `{cmd}` (writes this page and `results/controllers/*.png`; "
+        f"Regenerate with `{cmd}` (writes this page and `controllers/*.png` beside it; "
         f"`hdgym controllers` runs longer records, `--quick` shorter ones). "
         f"Run time {elapsed:.0f} s.",
         "",

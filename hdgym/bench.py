@@ -31,6 +31,7 @@ from hdgym.params import JointParams, preset
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 from hdgym.physics.lanes import PARALLEL_THRESHOLD, LaneBatch
+from hdgym.progress import bar
 
 #: a bench section: ``fn(quick) -> rows`` (one dict per row, as :func:`write_report` reads)
 SectionFn = Callable[[bool], list[dict]]
@@ -202,7 +203,7 @@ def bench_soak(quick: bool = False) -> list[dict]:
     from hdgym.params import preset_names
 
     rows = []
-    for name in preset_names():
+    for name in bar(preset_names(), "soak", unit="preset"):
         r = soak(preset(name), n_steps=100_000 if quick else 1_000_000)
         f, la = r["first"], r["last"]
         rows.append({
@@ -237,9 +238,9 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
         soak: bool = False) -> dict[str, list[dict]]:
     """Run every registered section and write the report (``soak`` adds the long soak runs)."""
     registered, failed = sections()
-    tables = {sec.title: sec.fn(quick) for sec in registered}
+    tables = {sec.title: sec.fn(quick) for sec in bar(registered, "bench", unit="section")}
     if soak:
         tables["Soak (issue: long runs)"] = bench_soak(quick)
     write_report(tables, out, "hdgym bench" + (" --quick" if quick else "")
-                 + (" --soak" if soak else ""), not_measured=failed)
+                 + (" --soak" if soak else "") + f" --out {out}", not_measured=failed)
     return tables
