@@ -100,7 +100,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--total-timesteps", type=int)
     ap.add_argument("--n-envs", type=int)
     ap.add_argument("--vec-env", choices=("dummy", "subproc"))
-    ap.add_argument("--out", type=Path)
+    ap.add_argument("--out", type=Path,
+                    help="run folder (default runs/<config>-s<seed>; removed if the run fails)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
