@@ -150,7 +150,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from hdgym.discrepancy.workflow import diagnose_files
+    from hdgym.discrepancy.command import diagnose_files
 
     report = diagnose_files(args.record, _params(args), out=Path(args.out),
                             validate=args.validate)
