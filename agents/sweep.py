@@ -86,7 +86,7 @@ def rl_train(params: JointParams, job: Any) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(job.workdir) / job.job_id if job.workdir else Path(tmp)
         summary = train(cfg, out, progress=False)
-        model = load_policy(Path(summary["final_policy"]))
+        model = load_policy(out / "final.zip")  # train.json names it relative to the cwd
         stats, _ = evaluate(cfg, ["policy"], n_eval, 1_000_000 + job.run_seed() % 1_000_000,
                             model)
     s = stats[0]

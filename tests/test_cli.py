@@ -294,3 +294,16 @@ def test_env_step_rejects_what_box_1_cannot_hold(action):
         env.step(np.array(action) if isinstance(action, list) and action != ["0.3"] else action)
     env.step([0.3])  # a list of one number is castable
     env.step(np.array([0.3], dtype=np.float32))
+
+
+def test_train_summary_names_files_relative(tmp_path, monkeypatch):
+    """Reports name files relative to the checkout (issue 13 item 7), not by machine path."""
+    from pathlib import Path
+
+    from agents.common import DEFAULT_CONFIGS, load_config
+    from agents.train import shown
+
+    monkeypatch.chdir(tmp_path)
+    src = load_config(DEFAULT_CONFIGS["ppo"])["source"]
+    assert shown(src) == "agents/configs/resonance_ppo.toml" and not Path(shown(src)).is_absolute()
+    assert shown(tmp_path / "runs" / "x" / "final.zip") == "runs/x/final.zip"
