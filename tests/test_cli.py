@@ -269,10 +269,15 @@ def test_ctrl_c_in_a_real_process(tmp_path):
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "hdgym.cli", "simulate", "--preset",
+    driver = ("import sys, hdgym.cli, hdgym.sim, hdgym.discrepancy.experiments\n"
+              "print('ready', flush=True)\n"
+              "sys.exit(hdgym.cli.main(sys.argv[1:]))\n")
+    proc = subprocess.Popen([sys.executable, "-c", driver, "simulate", "--preset",
                              "tuttle-joint1", "--command", "random:1:20", "--duration", "300",
-                             "--out", "x.csv"], cwd=tmp_path, stderr=subprocess.PIPE, text=True)
-    time.sleep(4)  # imported and running (the whole run takes ~7 s)
+                             "--out", "x.csv"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(1.5)  # into the run (which takes several seconds)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
