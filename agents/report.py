@@ -368,7 +368,8 @@ def other_joints(n: int) -> str:
     """Constant current steps on joints 2 and 3: is there a trap, and does crossing it
     cost torque (the trade-off the task needs)?"""
     verdicts = []
-    lines = [f"{n} held-out episodes per row.", "", "| joint | constant current (A) | reached (of episodes) | mean time to target (s) "
+    lines = [f"{n} held-out episodes per row.", "",
+             "| joint | constant current (A) | reached (of episodes) | mean time to target (s) "
              "| peak flexspline torque mean / max (N m) |", "|---|---|---|---|---|"]
     for name, levels in OTHER_JOINTS:
         cfg = load_config("resonance_ppo")
