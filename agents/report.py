@@ -298,7 +298,7 @@ def build(args: argparse.Namespace, quick: bool) -> str:
                for cap in (180, 190, 200, 210, 220)}
     oj = other_joints(min(args.check_episodes, 64)) if args.check_episodes else ""
     lc = learning_curve(args.run, out / "learning_curve.png")
-    train_txt = training_text(args.run)
+    train_txt = training_text(args.run) + "\n\n" + speed_text(quick)
     (out / "front.json").write_text(json.dumps(fronts, indent=1) + "\n")
     summary["deadline_rule"] = {"deadline": d_rule, "uncapped_train_success": uncapped,
                                 "best_train_success_at_2s": best_at}
@@ -397,6 +397,16 @@ def other_joints(n: int) -> str:
     return "\n".join(lines) + "\n\n" + ".\n".join(verdicts) + ".\n"
 
 
+def speed_text(quick: bool) -> str:
+    """The training speed-up, native batch against the DummyVecEnv setup, measured here."""
+    from agents.bench import bench_resonance_training
+
+    r = bench_resonance_training(quick)
+    return (f"Side by side in this run (`agents.bench.bench_resonance_training`, also a row of "
+            f"`hdgym bench`): {r['name']}: {r['value']:,.0f} {r['unit']}; {r['reference']}: "
+            f"{r['reference_value']:,.0f}; ratio **{r['ratio']:.2f}** ({r['note']}).")
+
+
 def training_text(run: Path | None) -> str:
     if run is None or not (run / "train.json").is_file():
         return ("Training wall time: not measured in this run (`--run` not given); see "
@@ -407,9 +417,9 @@ def training_text(run: Path | None) -> str:
             f"batch (`agents.vec_env.HarmonicDriveVecEnv`, hold and torque penalty inside the "
             f"batch), seed {t['seed']}: wall time **{t['wall_time_s'] / 60:.1f} min** "
             f"({t['agent_steps_per_s']:,.0f} agent steps/s) on the shared 2-core machine, one "
-            "torch thread. The committed policy before this change took 4.9 min for the same "
-            "800k agent steps on 8 DummyVecEnv envs; the side-by-side speed-up is measured in "
-            "`results/bench.md` (section Stable-Baselines3 training).")
+            "torch thread (the wall time depends on the other jobs sharing the machine). The "
+            "policy committed before this change took 4.9 min for the same 800k agent steps on 8 "
+            "DummyVecEnv envs.")
 
 
 def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
