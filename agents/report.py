@@ -57,6 +57,9 @@ RATING = GEAR_RATINGS["tuttle-joint1"]
 TRAIN_SEED, TEST_SEED = 0, 100_000
 HEADER = ("| variant | rating (N m) | deadline (s) | PPO policy, success (95 % CI) | best tuned "
           "classical family (chosen on training episodes) | its success, held-out (95 % CI) |")
+#: one colour per family in every panel (``<family>+ke`` dashed in its family's colour)
+COLORS = {"const": "tab:blue", "pi": "tab:orange", "pi_ramp": "tab:green", "damp": "tab:red",
+          "damp_full": "tab:purple", "damp_enc": "tab:pink", "two_phase": "tab:brown"}
 #: the figure's deadlines
 FIG_DEADLINES = (1.5, 2.0, 2.5, 3.0)
 
@@ -122,8 +125,10 @@ def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
                 continue
             i = f["deadlines"].index(d)
             for fam, v in f["families"].items():
+                base = fam.partition("+")[0]
                 ax.plot(f["caps"], [100 * e["test"] for e in v["front"][i]],
-                        label=label(fam), lw=1.2)
+                        label=label(fam), lw=1.2, color=COLORS.get(base, "tab:gray"),
+                        ls="--" if "+" in fam else "-")
             if var in pol:
                 p = pol[var]
                 ax.plot(f["caps"], [100 * success(p["time_to_target"], p["peak_torque"], cap,
@@ -136,7 +141,8 @@ def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
                 ax.set_ylabel("success, held-out (%)")
             if r == len(names) - 1:
                 ax.set_xlabel("torque cap R (N m)")
-    axes[0][0].legend(fontsize=7, loc="upper left")
+    for row in axes:
+        row[0].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
