@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
 from hdgym.effects import EFFECTS
-from hdgym.files import check_out
+from hdgym.files import atomic_write_text, check_out
 from hdgym.results_pages import PAGES
 
 QUICK_HELP = "shorter runs for a first look or a smoke test (never into results/)"
@@ -56,6 +57,38 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def params_header() -> str:
+    """The comment block `hdgym params` puts above a preset: what a file must hold, and the
+    default every field left out of a file takes."""
+    from dataclasses import MISSING, fields, is_dataclass
+
+    from hdgym.params.parts import PARTS, FrictionSide, Harmonic, Ripple
+
+    def plain(v: object) -> str:  # a default as TOML writes it
+        if isinstance(v, bool):
+            return str(v).lower()
+        if isinstance(v, tuple):
+            return "[" + ", ".join(map(plain, v)) + "]"
+        return f'"{v}"' if isinstance(v, str) else repr(v)
+
+    lines = ["# hdgym joint parameters, SI units (rad, s, kg m^2, N m, A, V, ohm).",
+             "# Edit and use with --params FILE. A file must hold [motor], [transmission],",
+             "# [compliance], [load] and [amplifier] with their required fields; any other",
+             "# section or field left out takes the default listed here ([effects] on: every",
+             "# effect):"]
+    tables = [*PARTS.items(), ("friction.input/output", FrictionSide),
+              ("[friction.*.ripple]", Ripple), ("[kinematic_error.harmonics]", Harmonic)]
+    for key, cls in tables:
+        need = [f.name for f in fields(cls) if f.default is MISSING
+                and f.default_factory is MISSING]
+        opt = [f"{f.name} = {plain(f.default)}" for f in fields(cls)
+               if f.default is not MISSING and not is_dataclass(f.default)]
+        text = f"#   [{key.strip('[]')}]" + (f" required: {', '.join(need)};" if need else "")
+        text += f" defaults: {', '.join(opt)}" if opt else ""
+        lines += textwrap.wrap(text, 96, subsequent_indent="#       ", break_on_hyphens=False)
+    return "\n".join(lines) + "\n\n"
+
+
 def cmd_params(args: argparse.Namespace) -> int:
     from hdgym import params
 
@@ -65,12 +98,12 @@ def cmd_params(args: argparse.Namespace) -> int:
         return 0
     if not args.preset:
         raise ValueError("give --preset NAME (see --list), and --out FILE.toml to write a file")
-    p = params.preset(args.preset)
+    text = params_header() + params.dumps(params.preset(args.preset))
     if args.out:
-        params.save(p, args.out)
+        atomic_write_text(args.out, text)
         print(f"wrote {args.out}")
     else:
-        sys.stdout.write(params.dumps(p))
+        sys.stdout.write(text)
     return 0
 
 
@@ -117,7 +150,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from hdgym.discrepancy.workflow import diagnose_files
+    from hdgym.discrepancy.command import diagnose_files
 
     report = diagnose_files(args.record, _params(args), out=Path(args.out),
                             validate=args.validate)
@@ -334,7 +367,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from hdgym.progress import announce_compiles
 
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("hdgym: interrupted", file=sys.stderr)
+        return 130
     try:
         with announce_compiles():
             return args.fn(args)
@@ -348,6 +385,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hdgym {args.cmd}: interrupted; files already finished are kept, none is "
               "half-written", file=sys.stderr)
         return 130
+    except MemoryError:
+        print(f"hdgym {args.cmd}: out of memory; ask for a shorter run", file=sys.stderr)
+        return 2
     except OSError as exc:
         print(f"hdgym {args.cmd}: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2

@@ -208,3 +208,107 @@ def test_train_crash_leaves_no_run_folder(tmp_path, monkeypatch, capsys, exc, co
         assert train_mod.main(["--algo", "ppo", "--out", str(out)]) == code
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+# --- one clear line (issue 13 item 6) ---------------------------------------------------------
+
+def _one_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_huge_duration_is_one_line(tmp_path, capsys):
+    out = tmp_path / "x.csv"
+    assert main(["simulate", "--preset", "tuttle-joint1", "--command", "step:1",
+                 "--duration", "1e9", "--out", str(out)]) == 2
+    assert "control periods" in _one_line(capsys) and not out.exists()
+
+
+def test_toml_with_a_string_number_names_the_field(tmp_path, capsys):
+    good = tmp_path / "j.toml"
+    assert main(["params", "--preset", "tuttle-joint1", "--out", str(good)]) == 0
+    bad = tmp_path / "bad.toml"
+    bad.write_text(good.read_text().replace("resistance = 3.4", 'resistance = "3.4"', 1))
+    assert main(["simulate", "--params", str(bad), "--command", "step:1", "--duration", "0.1",
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert "motor.resistance must be a number, got '3.4'" in _one_line(capsys)
+
+
+def test_params_output_documents_the_defaults(capsys):
+    from dataclasses import MISSING, fields
+
+    from hdgym.params.parts import PARTS
+
+    assert main(["params", "--preset", "tuttle-joint1"]) == 0
+    head = " ".join(line.lstrip("# ") for line in capsys.readouterr().out.splitlines()
+                    if line.startswith("#"))
+    assert "resistance = 1.0" in head and "required: inertia, torque_constant" in head
+    for key, cls in PARTS.items():
+        assert f"[{key}]" in head
+        for f in fields(cls):
+            if f.default is MISSING and f.default_factory is MISSING:
+                assert f.name in head
+
+
+def test_ctrl_c_is_one_line_exit_130(tmp_path, monkeypatch, capsys):
+    from hdgym import sim
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sim.Simulator, "trajectory", interrupted)
+    out = tmp_path / "x.csv"
+    assert main(["simulate", "--preset", "tuttle-joint1", "--command", "step:1",
+                 "--duration", "1", "--out", str(out)]) == 130
+    assert "interrupted" in _one_line(capsys) and list(tmp_path.iterdir()) == []
+
+
+def test_ctrl_c_in_a_real_process(tmp_path):
+    """SIGINT while a long simulation runs: exit 130, one line, no file."""
+    import signal
+    import time
+
+    driver = ("import sys, hdgym.cli, hdgym.sim, hdgym.discrepancy.experiments\n"
+              "print('ready', flush=True)\n"
+              "sys.exit(hdgym.cli.main(sys.argv[1:]))\n")
+    proc = subprocess.Popen([sys.executable, "-c", driver, "simulate", "--preset",
+                             "tuttle-joint1", "--command", "random:1:20", "--duration", "300",
+                             "--out", "x.csv"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(1.5)  # into the run (which takes several seconds)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    lines = [ln for ln in err.strip().splitlines() if "compiling" not in ln]
+    assert len(lines) == 1 and "interrupted" in lines[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("action", [[[0.3]], "0.3", 0.3, ["0.3"], [0.1, 0.2]])
+def test_env_step_rejects_what_box_1_cannot_hold(action):
+    import gymnasium as gym
+    import numpy as np
+
+    import hdgym  # noqa: F401  (registers the ids)
+
+    env = gym.make("HarmonicDriveJoint-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"shape \(1,\)"):
+        env.step(np.array(action) if isinstance(action, list) and action != ["0.3"] else action)
+    env.step([0.3])  # a list of one number is castable
+    env.step(np.array([0.3], dtype=np.float32))
+
+
+def test_train_summary_names_files_relative(tmp_path, monkeypatch):
+    """Reports name files relative to the checkout (issue 13 item 7), not by machine path."""
+    from pathlib import Path
+
+    from agents.common import DEFAULT_CONFIGS, load_config
+    from agents.train import shown
+
+    monkeypatch.chdir(tmp_path)
+    src = load_config(DEFAULT_CONFIGS["ppo"])["source"]
+    assert shown(src) == "agents/configs/resonance_ppo.toml" and not Path(shown(src)).is_absolute()
+    assert shown(tmp_path / "runs" / "x" / "final.zip") == "runs/x/final.zip"

@@ -209,7 +209,7 @@ class JointBatch:
         self.obs = np.zeros((n, len(task.obs_names)), dtype=np.float32)
         self.rew = np.zeros(n)
         self.term = np.zeros(n, dtype=np.bool_)
-        self.aux = np.zeros((n, 2))
+        self.aux = np.zeros((n, len(task.aux_names)))
         self.no_fresh = np.zeros(n, dtype=np.bool_)
         self.all_fresh = np.ones(n, dtype=np.bool_)
         self.zeros2 = np.zeros((n, 2))
@@ -343,12 +343,15 @@ def scalar_action(action: Any) -> float:
     vector env calls): NaN/inf raise ``ValueError``, values beyond +-1
     saturate like the amplifier.
     """
-    if type(action) is np.ndarray and action.shape == (1,):
+    if type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind in "iuf":
         a = float(action[0])
-    else:
-        arr = np.asarray(action, dtype=float).reshape(-1)
-        if arr.size != 1:
-            raise ValueError(f"action must hold one value, got shape {np.shape(action)}")
+    else:  # what Box((1,)) can hold: one real number in an array (or list) of shape (1,)
+        arr = np.asarray(action) if isinstance(action, (np.ndarray, list, tuple)) else None
+        if arr is None or arr.dtype.kind not in "iuf" or arr.shape != (1,):
+            what = (f"shape {arr.shape}, dtype {arr.dtype}" if arr is not None
+                    else type(action).__name__)
+            raise ValueError(f"action must be an array of shape (1,) holding one real number "
+                             f"(the action space is Box(-1, 1, (1,))), got {action!r} ({what})")
         a = float(arr[0])
     if not math.isfinite(a):
         raise ValueError(f"action must be finite, got {action!r}")
@@ -398,9 +401,8 @@ class HarmonicDriveEnv(gym.Env):
             s = b.xs[0, :6].tolist()
         info = dict(zip(INFO_STATES, s, strict=True))
         info["time"] = float(b.steps[0]) * b.ctrl_dt
-        aux = b.aux[0].tolist()
-        info[self._aux_names[0]] = aux[0]
-        info[self._aux_names[1]] = aux[1]
+        for name, v in zip(self._aux_names, b.aux[0].tolist(), strict=True):
+            info[name] = v
         info["diverged"] = bool(b.bad[0])
         return info
 

@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from hdgym.params import atomic_write_text
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
 from hdgym.sweep.backends import FIXED_COLUMNS
 from hdgym.sweep.store import read_rows
 
@@ -156,6 +157,13 @@ def summarize(out_dir: str | Path, *, command: str | None = None,
         if len(errors) > 50:
             lines.append(f"\n… and {len(errors) - 50} more (see results.csv).")
         lines.append("")
+    # the page this run replaces: the committed copy if there is one, else the run's own
+    previous = Path(dest) / f"{name}.md" if dest is not None else out_dir / "summary.md"
+    if not previous.is_file():
+        previous = out_dir / "summary.md"
+    moved = moved_section(previous, "\n".join(lines))
+    if moved:
+        lines += [moved]
     lines += ["![summary](summary.png)" if dest is None else f"![summary]({name}.png)", ""]
 
     md = out_dir / "summary.md"
