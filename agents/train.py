@@ -70,7 +70,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     eval_env = None
     if int(t["eval_freq"]) > 0:
         n_eval = int(t["eval_episodes"])
-        eval_env = make_vec_env(cfg, n_eval, seed + 10_000, None, "dummy")
+        eval_env = make_vec_env(cfg, n_eval, seed + 10_000, None, t["vec_env"])
         callbacks.append(EvalCallback(eval_env, n_eval_episodes=n_eval,
                                       eval_freq=max(int(t["eval_freq"]) // n_envs, 1),
                                       log_path=str(out / "eval"),
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int)
     ap.add_argument("--total-timesteps", type=int)
     ap.add_argument("--n-envs", type=int)
-    ap.add_argument("--vec-env", choices=("dummy", "subproc"))
+    ap.add_argument("--vec-env", choices=("native", "dummy", "subproc"))
     ap.add_argument("--out", type=Path,
                     help="run folder (default runs/<config>-s<seed>; removed if the run fails)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
