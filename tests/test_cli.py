@@ -312,3 +312,12 @@ def test_train_summary_names_files_relative(tmp_path, monkeypatch):
     src = load_config(DEFAULT_CONFIGS["ppo"])["source"]
     assert shown(src) == "agents/configs/resonance_ppo.toml" and not Path(shown(src)).is_absolute()
     assert shown(tmp_path / "runs" / "x" / "final.zip") == "runs/x/final.zip"
+
+
+def test_bundled_spec_name_beside_a_folder_of_that_name(tmp_path, monkeypatch, capsys):
+    """`hdgym sweep controllers` from the checkout root, where controllers/ is a folder."""
+    (tmp_path / "controllers").mkdir()
+    monkeypatch.chdir(tmp_path)
+    results = _fake_repo(tmp_path)
+    assert main(["sweep", "controllers", "--quick", "--out", str(results / "x")]) == 2
+    assert "quick runs never write into results/" in capsys.readouterr().err  # spec was found
