@@ -367,7 +367,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from hdgym.progress import announce_compiles
 
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("hdgym: interrupted", file=sys.stderr)
+        return 130
     try:
         with announce_compiles():
             return args.fn(args)
