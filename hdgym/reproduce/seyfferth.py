@@ -196,6 +196,11 @@ def check_step(out: Path, quick: bool) -> Item:
                          f"rad, overshoot {100 * over:.1f} % {_verdict(ok)}")
     item.measured.append(f"rise to 90 % of the final angle in "
                          f"{t[np.argmax(th >= 0.9 * final)]:.3f} s")
+    item.measured.append("for information, the step after a history (one 0.5 Hz ±1.1 A cycle, "
+                         "then 1 s at 0 A; the report does not give the drive's state before "
+                         "the step): " + "; ".join(
+                             f"cycle starting {'up' if sign > 0 else 'down'}: rise "
+                             f"{_step_after_cycle(sim, sign):.3f} rad" for sign in (1.0, -1.0)))
     plt = plt_module()
     fig, ax = plt.subplots(figsize=(6, 4.5))
     ax.plot(t, th, label="model, 1.1 A")
@@ -207,6 +212,15 @@ def check_step(out: Path, quick: bool) -> Item:
     ax.set_title("RH-32 step input response (beside Seyfferth fig. 22)", fontsize=10)
     ax.legend(fontsize=8)
     return _print(finish(item, fig, out / "seyfferth_rh32_step.png", ok))
+
+
+def _step_after_cycle(sim: Any, sign: float) -> float:
+    """Largest rise of the input angle in a 1.1 A step taken after one slow current cycle."""
+    t = np.arange(2000) * sim.ctrl_dt
+    pre = np.where(t < 2.0, sign * 1.1 * np.sin(np.pi * t), 0.0)
+    _, _, _, st = sim.trajectory(np.concatenate([pre, np.zeros(1000)]))
+    _, _, _, st2 = sim.trajectory(np.full(1000, 1.1), state=st[-1])
+    return float(np.max(st2[:, L.TH_M]) - st[-1, L.TH_M])
 
 
 # ===================================================================== (h) RH-25 fig. 18
