@@ -18,7 +18,6 @@ smoke-test page into ``runs/`` only.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import sys
@@ -42,6 +41,7 @@ from agents.front import (
     uncut,
     wilson,
 )
+from agents.report_figures import front_figure, learning_curve, speed_figure
 from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
 from hdgym.files import atomic_write_text, check_out
 
@@ -57,11 +57,6 @@ RATING = GEAR_RATINGS["tuttle-joint1"]
 TRAIN_SEED, TEST_SEED = 0, 100_000
 HEADER = ("| variant | rating (N m) | deadline (s) | PPO policy, success (95 % CI) | best tuned "
           "classical family (chosen on training episodes) | its success, held-out (95 % CI) |")
-#: one colour per family in every panel (``<family>+ke`` dashed in its family's colour)
-COLORS = {"const": "tab:blue", "pi": "tab:orange", "pi_ramp": "tab:green", "damp": "tab:red",
-          "damp_full": "tab:purple", "damp_enc": "tab:pink", "two_phase": "tab:brown"}
-#: the figure's deadlines
-FIG_DEADLINES = (1.5, 2.0, 2.5, 3.0)
 
 
 def pct(x: float) -> str:
@@ -104,82 +99,6 @@ def deadline_rule(front: dict[str, Any]) -> tuple[float | None, dict[str, float]
         if min(fr.values()) >= 0.9:
             return d, fr
     return None, {}
-
-
-def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
-                 out: Path) -> None:
-    """Success against torque cap, one panel per (variant, deadline)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = list(fronts)
-    fig, axes = plt.subplots(len(names), len(FIG_DEADLINES), figsize=(4 * len(FIG_DEADLINES),
-                             3.2 * len(names)), sharex=True, sharey=True, squeeze=False)
-    for r, var in enumerate(names):
-        f = fronts[var]
-        for c, d in enumerate(FIG_DEADLINES):
-            ax = axes[r][c]
-            if d not in f["deadlines"]:
-                ax.set_visible(False)
-                continue
-            i = f["deadlines"].index(d)
-            for fam, v in f["families"].items():
-                base = fam.partition("+")[0]
-                ax.plot(f["caps"], [100 * e["test"] for e in v["front"][i]],
-                        label=label(fam), lw=1.2, color=COLORS.get(base, "tab:gray"),
-                        ls="--" if "+" in fam else "-")
-            if var in pol:
-                p = pol[var]
-                ax.plot(f["caps"], [100 * success(p["time_to_target"], p["peak_torque"], cap,
-                                                  d).mean() for cap in f["caps"]],
-                        "k", lw=2.2, label="PPO policy")
-            ax.axvline(RATING, color="grey", ls=":", lw=1)
-            ax.set_title(f"{var.replace('HarmonicDrive', '')}\ndeadline {d:g} s", fontsize=9)
-            ax.grid(alpha=0.3)
-            if c == 0:
-                ax.set_ylabel("success, held-out (%)")
-            if r == len(names) - 1:
-                ax.set_xlabel("torque cap R (N m)")
-    for row in axes:
-        row[0].legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-
-
-def learning_curve(run: Path | None, out: Path) -> str:
-    """Training success and return against episodes from the run's VecMonitor file."""
-    if run is None or not (run / "monitor" / "native.monitor.csv").is_file():
-        return ""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    text = (run / "monitor" / "native.monitor.csv").read_text().splitlines()
-    rows = list(csv.DictReader(text[1:]))  # line 0 is the monitor's JSON header
-    ret = np.array([float(r["r"]) for r in rows])
-    ok = np.array([r.get("is_success") == "True" for r in rows], dtype=float)
-    t = np.array([float(r["t"]) for r in rows])
-    w = max(len(ret) // 40, 1)
-    k = np.ones(w) / w
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
-    ax[0].plot(t, ret, ".", ms=2, alpha=0.3)
-    ax[0].plot(t[w - 1:], np.convolve(ret, k, "valid"))
-    ax[0].set(xlabel="wall time (s)", ylabel="episode return")
-    ax[1].plot(t[w - 1:], 100 * np.convolve(ok, k, "valid"))
-    ax[1].set(xlabel="wall time (s)", ylabel=f"success, last {w} episodes (%)")
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    with (out.with_suffix(".csv")).open("w", newline="") as fh:
-        wr = csv.writer(fh)
-        wr.writerow(["wall_time_s", "episode_return", "success"])
-        wr.writerows(zip(t.round(2), ret.round(3), ok.astype(int), strict=True))
-    return (f"Learning curve: `{out.name}` (training episodes from the run's VecMonitor file; "
-            f"data in `{out.with_suffix('.csv').name}`).")
 
 
 def variant_config(name: str) -> tuple[dict[str, Any], float]:
@@ -296,13 +215,18 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     if args.check_episodes and main_var in pol:
         checks = robustness(main_var, fronts[main_var], args.check_episodes, summary)
     front_figure({k: v for k, v in fronts.items() if VARIANTS[k][2] is None or k == main_var},
-                 pol, out / "front.png")
+                 pol, out / "front.png", RATING)
     d_rule, uncapped = deadline_rule(fronts[main_var])
     i2 = fronts[main_var]["deadlines"].index(DEADLINE)
     best_at = {cap: max(f["front"][i2][fronts[main_var]["caps"].index(cap)]["train"]
                         for f in fronts[main_var]["families"].values())
                for cap in (180, 190, 200, 210, 220)}
     oj = other_joints(min(args.check_episodes, 64)) if args.check_episodes else ""
+    sf = ""
+    if main_var in pol:
+        cfg, deadline = variant_config(main_var)
+        sf = speed_figure(main_var, cfg, deadline, POLICIES / VARIANTS[main_var][1],
+                          fronts[main_var], out / "speed_vs_time.png", RATING, TEST_SEED)
     lc = learning_curve(args.run, out / "learning_curve.png")
     train_txt = training_text(args.run) + "\n\n" + speed_text(quick)
     (out / "front.json").write_text(json.dumps(fronts, indent=1) + "\n")
@@ -310,7 +234,7 @@ def build(args: argparse.Namespace, quick: bool) -> str:
                                 "best_train_success_at_2s": best_at}
     (out / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     md = page(rows, details, checks, d_rule, uncapped, best_at, lc, train_txt, n_test, n_train,
-              quick, oj)
+              quick, oj, sf)
     atomic_write_text(out / "evaluation.md", md)
     return md
 
@@ -430,7 +354,7 @@ def training_text(run: Path | None) -> str:
 
 def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
          uncapped: dict[str, float], best_at: dict[int, float], lc: str, train_txt: str,
-         n_test: int, n_train: int, quick: bool, oj: str) -> str:
+         n_test: int, n_train: int, quick: bool, oj: str, sf: str) -> str:
     unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in uncapped.items())
     bat = ", ".join(f"{k} N m: {pct(v)}" for k, v in best_at.items())
     head = "**Quick smoke-test run: small grids, few episodes; not a result.**\n\n" if quick \
@@ -501,6 +425,10 @@ deadline; each family's curve is its best training-episode pick at that cap and 
 (so a family's curve may use a different tuning at each point); black: the PPO policy
 (one policy, trained at R = {RATING:.0f} N m, D = {DEADLINE:g} s); dotted: the rating.
 Data: `front.json`.
+
+![speed](speed_vs_time.png)
+
+{sf}
 
 ## How far it carries
 
