@@ -316,14 +316,19 @@ def other_joints(n: int) -> str:
         reach = np.isfinite(res["time_to_target"]).mean(axis=1)
         peaks = res["peak_torque"].mean(axis=1)
         trapped = [lv for lv, r in zip(levels, reach, strict=True) if r < 0.5]
-        free = bool(reach[-1] >= 0.95 and peaks[-1] <= peaks.max() + 1e-9
-                    and peaks[-1] <= 1.1 * peaks.min() + 1.0)
+        crossing = reach >= 0.95
         verdicts.append(
             f"{name}: trapped (reached in < 50 %) at {', '.join(f'{v:g}' for v in trapped)} A"
             if trapped else f"{name}: no current tried stays trapped")
-        verdicts[-1] += ("; full current crosses in every episode with no more torque than "
-                         "the currents that stay below: no trade-off for a rating"
-                         if free else "; crossing costs torque here")
+        if not crossing[-1]:
+            verdicts[-1] += "; full current does not cross in >= 95 %: no task by a deadline"
+        elif peaks[-1] <= 1.25 * peaks[crossing].min():
+            verdicts[-1] += (f"; full current crosses fastest with a peak of {peaks[-1]:.0f} "
+                             f"N m against {peaks[crossing].min():.0f} N m for the gentlest "
+                             "current that crosses: no torque-time trade-off for a rating")
+        else:
+            verdicts[-1] += (f"; crossing faster costs torque ({peaks[crossing].min():.0f} to "
+                             f"{peaks[-1]:.0f} N m mean peak): a candidate for a rated variant")
     return "\n".join(lines) + "\n\n" + ".\n".join(verdicts) + ".\n"
 
 
