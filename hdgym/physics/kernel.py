@@ -69,6 +69,7 @@ from hdgym.physics.layout import (
     KNEE,
     KT,
     LOAD_T,
+    MESH,
     MU_LOAD,
     N_STATE,
     NKE,
@@ -319,6 +320,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     nslip = int(p[NSLIP]) if (flags & HYST) else 0
     tanh_model = p[HMODEL] == 1.0 and (flags & HYST) != 0
     mu = p[MU_LOAD] if (flags & LOADDEP) else 0.0
+    mesh = p[MESH] != 0.0
     amp_on = (flags & AMP) != 0
     imax = p[I_MAX]
     inv_res = 1.0 / p[RES]
@@ -412,6 +414,11 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         # --- motor side
         lvl = _level(p, FIN, w_m, 0.0, flags, trig, _RIP0[0], nrip_in)
         vis = _visc(vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk, w_m)
+        if mesh:
+            # eq. (8): the transmission friction at the mesh speed, seen by the WG through `gear`
+            v_g = w_m * gear
+            lvl += gear * _level(p, FOUT, v_g, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
+            vis += gear * gear * _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, v_g)
         w_m_new, pm = _advance(w_m, t_m - t_k * gear, h_m, vis, lvl)
         # --- output side
         t_load = t_load0
@@ -420,6 +427,8 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         if locked:
             w_o_new = 0.0
             po = 0.0
+        elif mesh:
+            w_o_new, po = _advance(w_o, t_k - t_load, h_o, 0.0, 0.0)
         else:
             lvl = _level(p, FOUT, w_o, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
             vis = _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, w_o)

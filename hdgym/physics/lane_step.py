@@ -57,6 +57,7 @@ from hdgym.physics.lane_fields import (
     KT,
     LOAD0,
     LOCK,
+    MESH,
     MU,
     NKE,
     NRIP_IN,
@@ -345,17 +346,25 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         _s(w, L.CUR, j, cur)
         t_m = _g(w, KT, j) * cur
         _s(w, L.T_MOTOR, j, t_m)
+        # --- transmission friction (eq. 8): at the output speed, or at the mesh speed
+        # w_m * gear and reflected to the WG by gear (placement mesh)
+        gear = _g(w, T_GEAR, j)
+        mesh = _g(w, MESH, j) != 0.0
+        v_rel = w_m * gear if mesh else w_o
+        lvl_t = _level(w, a_out, j, v_rel, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
+        lvl_t = lvl_t if lvl_t > 0.0 else 0.0
+        vis_t = _visc(w, a_out, j, v_rel)
+        g_m = gear if mesh else 0.0
         # --- motor side
         lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
-        lvl = lvl if lvl > 0.0 else 0.0
-        w_m_new, pm = _advance(w_m, t_m - t_k * _g(w, T_GEAR, j), _g(w, H_M, j),
-                               _visc(w, a_in, j, w_m), lvl)
+        lvl = (lvl if lvl > 0.0 else 0.0) + g_m * lvl_t
+        w_m_new, pm = _advance(w_m, t_m - t_k * gear, _g(w, H_M, j),
+                               _visc(w, a_in, j, w_m) + g_m * g_m * vis_t, lvl)
         # --- output side
         t_load = _g(w, LOAD0, j) + _g(w, TEXT, j)
         t_load = t_load + _g(w, GRAV, j) * _g(w, SIN + P_GRAV, j)
-        lvl = _level(w, a_out, j, w_o, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
-        lvl = lvl if lvl > 0.0 else 0.0
-        w_o_new, po = _advance(w_o, t_k - t_load, _g(w, H_O, j), _visc(w, a_out, j, w_o), lvl)
+        lvl = 0.0 if mesh else lvl_t
+        w_o_new, po = _advance(w_o, t_k - t_load, _g(w, H_O, j), 0.0 if mesh else vis_t, lvl)
         locked = _g(w, LOCK, j) != 0.0
         w_o_new = 0.0 if locked else w_o_new
         po = 0.0 if locked else po

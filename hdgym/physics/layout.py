@@ -70,6 +70,7 @@ SLIP_W = _col("hysteresis.element_strength", MAX_SLIP_ELEMENTS)
 TANH_B = _col("hysteresis.width")
 TANH_G = _col("hysteresis.shape")
 MU_LOAD = _col("friction.load_coefficient")
+MESH = _col("friction.placement")  # 0 output (to ground), 1 mesh (FS-CS, seen by the WG)
 NKE = _col("kinematic_error.n_harmonics")
 KE_ORD = _col("kinematic_error.order", MAX_HARMONICS)  # effective order of the WG angle
 KE_AMP = _col("kinematic_error.amplitude", MAX_HARMONICS)
@@ -155,6 +156,7 @@ def pack(p: JointParams) -> np.ndarray:
     row[TANH_B] = h.width
     row[TANH_G] = h.shape
     row[MU_LOAD] = p.friction.load_coefficient
+    row[MESH] = 1.0 if p.friction.placement == "mesh" else 0.0
     _pack_side(row, FIN, p.friction.input)
     _pack_side(row, FOUT, p.friction.output)
     ke = p.kinematic_error.harmonics

@@ -168,13 +168,20 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     t_m = p[:, L.KT] * cur
     x[:, L.T_MOTOR] = t_m
     zero = np.zeros(len(x))
-    lvl = _level(p, L.FIN, w_m, th_m, th_o, zero, flags)
-    w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], _visc(p, L.FIN, w_m, flags), lvl,
-                           dt)
-    t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext
     mu = np.where(_on(flags, "load_dependent_friction"), p[:, L.MU_LOAD], 0.0)
-    lvl = _level(p, L.FOUT, w_o, th_m, th_o, mu * np.abs(t_k), flags)
-    w_o_free, po = _advance(w_o, t_k - t_load, p[:, L.J_O], _visc(p, L.FOUT, w_o, flags), lvl, dt)
+    # eq. (8): the transmission friction acts at the output speed (placement output) or at
+    # the mesh speed w_m * gear, reflected to the WG by `gear` (placement mesh)
+    mesh = p[:, L.MESH] != 0.0
+    v_rel = np.where(mesh, w_m * gear, w_o)
+    lvl_t = _level(p, L.FOUT, v_rel, th_m, th_o, mu * np.abs(t_k), flags)
+    vis_t = _visc(p, L.FOUT, v_rel, flags)
+    g_m = np.where(mesh, gear, 0.0)
+    lvl = _level(p, L.FIN, w_m, th_m, th_o, zero, flags) + g_m * lvl_t
+    vis = _visc(p, L.FIN, w_m, flags) + g_m * g_m * vis_t
+    w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], vis, lvl, dt)
+    t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext
+    w_o_free, po = _advance(w_o, t_k - t_load, p[:, L.J_O], np.where(mesh, 0.0, vis_t),
+                            np.where(mesh, 0.0, lvl_t), dt)
     locked = (flags & LOCKED_OUTPUT_BIT) != 0
     w_o_new = np.where(locked, 0.0, w_o_free)
     po = np.where(locked, 0.0, po)
