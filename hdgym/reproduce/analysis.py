@@ -122,50 +122,121 @@ def starting_current(p: JointParams, currents: np.ndarray | None = None, duratio
 # ===================================================================== (b) current steps
 
 
-def step_table(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
-               duration: float = 4.0, average: float = 2.0, traces: bool = False
-               ) -> tuple[np.ndarray, np.ndarray | None]:
+@dataclass(frozen=True)
+class StepRuns:
+    """Tuttle §2.6 current steps from rest: what each step did over its last ``average`` s.
+
+    Attributes:
+        currents: step currents, A.
+        speed: mean WG speed, rad/s.
+        ripple: WG-speed ripple, (max - min) / mean over the window.
+        torque_mean: mean flexspline torque (the torque sensor's reading), N m.
+        torque_peak: largest |flexspline torque| in the window, N m.
+        torque_std: standard deviation of the flexspline torque in the window, N m.
+        wg_speed: WG speed of every step at every control period, rad/s, ``(n, n_currents)``.
+        torque: flexspline torque likewise, N m.
+        ctrl_dt: control period, s.
+    """
+
+    currents: np.ndarray
+    speed: np.ndarray
+    ripple: np.ndarray
+    torque_mean: np.ndarray
+    torque_peak: np.ndarray
+    torque_std: np.ndarray
+    wg_speed: np.ndarray
+    torque: np.ndarray
+    ctrl_dt: float
+
+
+def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
+              duration: float = 4.0, average: float = 2.0) -> StepRuns:
     """Tuttle §2.6 current steps from rest, all in one batched kernel call per period.
 
     Args:
         p: the joint, or one joint per current.
         currents: step currents, A.
         duration: length of each step, s.
-        average: the mean speed is taken over the last ``average`` s.
-        traces: also return the WG speed of every env at every control period.
+        average: the statistics are taken over the last ``average`` s.
 
-    Returns:
-        ``(mean WG speed per current in rad/s, traces (n_steps, n_currents) in rad/s or None)``.
+    Raises:
+        ValueError: joints that differ in control period or substeps, or a count mismatch.
+        RuntimeError: a step diverged (names the current).
     """
     currents = np.asarray(currents, dtype=float)
     plist = p if isinstance(p, list) else [p] * currents.size
     if len(plist) != currents.size:
-        raise ValueError("step_table: one joint per current, or one joint for all")
+        raise ValueError("step_runs: one joint per current, or one joint for all")
     ps = np.stack([L.pack(q) for q in plist])
     fl = np.array([flags_of(q.effects) for q in plist], dtype=np.int64)
     dts = {q.integration.ctrl_dt for q in plist}
     subs = {int(q.integration.n_substeps) for q in plist}
     if len(dts) != 1 or len(subs) != 1:
-        raise ValueError("step_table: all joints must share ctrl_dt and n_substeps")
+        raise ValueError("step_runs: all joints must share ctrl_dt and n_substeps")
     dt, n_sub = dts.pop(), subs.pop()
     xs = L.initial_state(ps, fl)
     bad = np.zeros(currents.size, dtype=bool)
     zero = np.zeros(currents.size)
     n = int(round(duration / dt))
     start = n - int(round(average / dt))
-    acc = np.zeros(currents.size)
-    out = np.empty((n, currents.size)) if traces else None
+    w = np.empty((n, currents.size))
+    tk = np.empty((n, currents.size))
     step = kernel.step_parallel if currents.size > 2 else kernel.step_serial
     for k in range(n):
         step(xs, ps, currents, zero, dt / n_sub, n_sub, fl, bad)
         if bad.any():
-            raise RuntimeError(f"step_table: diverged at t = {k * dt:.4g} s, current "
+            raise RuntimeError(f"step_runs: diverged at t = {k * dt:.4g} s, current "
                                f"{currents[np.argmax(bad)]} A")
-        if out is not None:
-            out[k] = xs[:, L.W_M]
-        if k >= start:
-            acc += xs[:, L.W_M]
-    return acc / (n - start), out
+        w[k] = xs[:, L.W_M]
+        tk[k] = xs[:, L.TK]
+    ww, tw = w[start:], tk[start:]
+    speed = ww.mean(axis=0)
+    ripple = (ww.max(axis=0) - ww.min(axis=0)) / np.maximum(np.abs(speed), 1e-300)
+    return StepRuns(currents=currents, speed=speed, ripple=ripple, torque_mean=tw.mean(axis=0),
+                    torque_peak=np.abs(tw).max(axis=0), torque_std=tw.std(axis=0), wg_speed=w,
+                    torque=tk, ctrl_dt=dt)
+
+
+def step_table(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
+               duration: float = 4.0, average: float = 2.0, traces: bool = False
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Mean WG speed of each current step (:func:`step_runs`), rad/s.
+
+    Returns:
+        ``(mean WG speed per current in rad/s, traces (n_steps, n_currents) in rad/s or None)``.
+    """
+    runs = step_runs(p, currents, duration, average)
+    return runs.speed, (runs.wg_speed if traces else None)
+
+
+def plateau_near(currents: np.ndarray, speeds: np.ndarray, target: float, tol: float = 0.15,
+                 spread: float = 0.10, min_len: int = 3) -> tuple[int, int] | None:
+    """The longest run of consecutive currents whose speeds lie within ``spread`` of each
+    other (max/min - 1) and whose mean lies within ``tol`` of ``target`` (a resonance
+    plateau, Tuttle §2.6); None if no run has ``min_len`` currents."""
+    sp = np.asarray(speeds, dtype=float)
+    best: tuple[int, int] | None = None
+    for a in range(sp.size):
+        for b in range(a + min_len - 1, sp.size):
+            s = sp[a: b + 1]
+            if s.min() <= 0 or s.max() / s.min() - 1 > spread:
+                break
+            if abs(s.mean() / target - 1) <= tol and (best is None or b - a > best[1] - best[0]):
+                best = (a, b)
+    return best
+
+
+def resonant_step(speeds: np.ndarray, fluctuation: np.ndarray, target: float, tol: float = 0.15,
+                  factor: float = 3.0) -> int | None:
+    """A step whose mean speed lies within ``tol`` of ``target`` and whose torque
+    fluctuation is at least ``factor`` times the median of all steps (a resonant area,
+    Tuttle §2.6: "torque fluctuations can become extremely large at velocities which
+    excite system resonance"); the one with the largest fluctuation, or None."""
+    sp = np.asarray(speeds, dtype=float)
+    fl = np.asarray(fluctuation, dtype=float)
+    med = float(np.median(fl))
+    idx = [k for k in range(sp.size) if abs(sp[k] / target - 1) <= tol and fl[k] >= factor * med]
+    return max(idx, key=lambda k: fl[k]) if idx else None
 
 
 @dataclass(frozen=True)
