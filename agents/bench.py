@@ -1,4 +1,8 @@
-"""SB3 training throughput for ``hdgym bench``, measured side by side in one run."""
+"""SB3 training throughput for ``hdgym bench``, measured side by side in one run.
+
+hdgym finds this module through the entry point ``agents = "agents.bench"`` of
+the group ``hdgym.bench_sections`` (see :mod:`hdgym.plugins`).
+"""
 
 from __future__ import annotations
 
@@ -8,9 +12,11 @@ from typing import Any
 import gymnasium as gym
 
 from agents.vec_env import HarmonicDriveVecEnv
+from hdgym.bench import register_section
 from hdgym.envs.bench import JOINT, compare_rates
 
 
+@register_section("Stable-Baselines3 training", order=30)
 def bench_sb3(quick: bool = False, **kw: Any) -> list[dict[str, Any]]:
     """PPO (SB3) training throughput on :class:`~agents.vec_env.HarmonicDriveVecEnv`
     against a DummyVecEnv of single envs, 16 envs each (rollouts and updates, the

@@ -450,7 +450,8 @@ def main(argv: list[str] | None = None) -> int:
                     "(e.g. other seeds)")
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=1000)
-    ap.add_argument("--out", type=Path, default=Path("results/rl"))
+    ap.add_argument("--out", type=Path, default=Path("runs/rl"),
+                    help="folder to write (default %(default)s; committed: --out results/rl)")
     ap.add_argument("--check-seed", type=int, default=0,
                     help="first seed of a second, larger set of episodes for the policy only")
     ap.add_argument("--check-episodes", type=int, default=200)

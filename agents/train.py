@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -115,10 +116,19 @@ def main(argv: list[str] | None = None) -> int:
                 cfg["train"][key] = val
         name = Path(cfg["source"]).stem
         out = args.out or Path("runs") / f"{name}-s{cfg['train']['seed']}"
-        summary = train(cfg, out, progress=not args.no_progress)
+        created = not out.exists()
+        try:
+            summary = train(cfg, out, progress=not args.no_progress)
+        except BaseException:  # no half-made run folder is left behind
+            if created:
+                shutil.rmtree(out, ignore_errors=True)
+            raise
     except ValueError as exc:
         print(f"agents.train: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("agents.train: interrupted; no unfinished run folder is kept", file=sys.stderr)
+        return 130
     print(json.dumps(summary, indent=1))
     return 0
 

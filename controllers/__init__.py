@@ -19,7 +19,14 @@ Modules, one job each:
 * :mod:`controllers.tuning` -- linear two-inertia model and PID design with
   python-control.
 * :mod:`controllers.adapter` -- run a controller as a policy on the envs.
-* :mod:`controllers.benchmark` -- ``hdgym controllers`` → results/controllers.md.
+* :mod:`controllers.scenarios` -- closed-loop runs with the true states beside
+  the measured ones, references, the benchmark's PID design, metrics.
+* :mod:`controllers.experiments` -- the benchmark's four experiments and
+  what they run on.
+* :mod:`controllers.benchmark` -- ``hdgym controllers``: runs them, then
+  :mod:`controllers.figures` draws and :mod:`controllers.report` writes the page.
+* :mod:`controllers.sweep` -- ``hdgym sweep`` scenarios ``controllers:NAME``
+  (one controller config per run), found through an entry point.
 """
 
 from controllers.base import Controller, Measurement

@@ -2,9 +2,10 @@
 
 Each function runs one scenario on :class:`hdgym.sim.Simulator` with the
 hardware on (amplifier limits, quantized encoders) and returns the measured
-:class:`hdgym.record.Record` together with the *true* output angle, which
-is recovered by re-simulating the recorded current command from the same
-initial state (the simulator is deterministic; see :mod:`hdgym.sim`).
+:class:`hdgym.record.Record` together with the *true* states, recovered as a
+second record by re-simulating the recorded current command from the same
+initial state without sensors (the simulator is deterministic; see
+:mod:`hdgym.sim`).
 """
 
 from __future__ import annotations
@@ -20,16 +21,15 @@ from controllers.base import Controller
 from controllers.pid import PositionPID
 from controllers.tuning import design_pid, linearize, output
 from hdgym.params import JointParams
-from hdgym.physics import layout as L
 from hdgym.sim import Simulator
 
 
 @dataclass
 class Run:
-    """One closed-loop run: the measured record and the true states."""
+    """One closed-loop run: the measured record and the true states (a record of them)."""
 
     record: Any
-    states: np.ndarray
+    truth: Any
     reference: np.ndarray
 
     @property
@@ -39,7 +39,7 @@ class Run:
     @property
     def output_angle(self) -> np.ndarray:
         """True output angle, rad."""
-        return self.states[:, L.TH_O]
+        return np.asarray(self.truth.columns["output_angle"])
 
     @property
     def error(self) -> np.ndarray:
@@ -62,9 +62,9 @@ def closed_loop(p: JointParams, controller: Controller, duration: float,
                               load_torque=load_torque, state=x0)
     u = np.asarray(rec.columns["current_command"])
     tl = None if load_torque is None else _load_array(sim, load_torque, rec)
-    _, _, _, states = sim.trajectory(u, state=x0, load_torque=tl, seed=seed)
+    truth = Simulator(p, sensors=False).run(u, state=x0, load_torque=tl, seed=seed)
     ref = np.asarray(rec.columns["reference"])
-    return Run(record=rec, states=states, reference=ref)
+    return Run(record=rec, truth=truth, reference=ref)
 
 
 def _load_array(sim: Simulator, load_torque: Any, rec: Any) -> np.ndarray:

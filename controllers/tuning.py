@@ -16,8 +16,8 @@ with ``g = 1/ratio - theta_ke'(theta_m0)`` (the gear factor through the
 kinematic error at the operating WG angle), ``k`` the compliance slope at the
 operating torsion (plus the stuck Maxwell-slip stiffness when hysteresis is
 on: small reversals do not slip the elements), ``b`` the viscous
-coefficients. Coulomb-type friction, stiction and amplifier saturation are
-not linear and are left out.
+coefficients; ``g`` and ``k`` come from :mod:`hdgym.linearize`. Coulomb-type
+friction, stiction and amplifier saturation are not linear and are left out.
 
 :func:`design_pid` places a PID's gain crossover at a chosen frequency with
 a chosen phase margin and checks the result with :func:`loop_margins`
@@ -35,52 +35,11 @@ from scipy.optimize import brentq
 
 from controllers.base import check_nonneg, check_positive
 from controllers.pid import PID
+from hdgym.linearize import gear_factor, stiffness
 from hdgym.params import JointParams
-from hdgym.physics import kernel
-from hdgym.physics import layout as L
 
 OUTPUTS = ("motor_velocity", "output_angle", "output_torque", "motor_angle", "output_velocity")
 STATES = ("motor_angle", "motor_velocity", "output_angle", "output_velocity", "motor_current")
-
-
-def _flags(p: JointParams) -> int:
-    from hdgym.effects import flags_of
-
-    return flags_of(p.effects)
-
-
-def spring_slope(p: JointParams, torsion: float) -> float:
-    """dT/d(torsion) of the flexspline spring at ``torsion`` (output rad), N m/rad."""
-    row, flags = L.pack(p), _flags(p)
-    h = max(1e-9, 1e-6 * abs(torsion))
-    return (kernel.spring_torque(torsion + h, row, flags)
-            - kernel.spring_torque(torsion - h, row, flags)) / (2 * h)
-
-
-def torsion_at(p: JointParams, torque: float) -> float:
-    """Torsion (output rad) at which the spring carries ``torque`` (N m)."""
-    row, flags = L.pack(p), _flags(p)
-    if torque == 0:
-        return 0.0
-    lo, hi = 0.0, abs(torque) / p.compliance.stiffness * 2 + 1e-9
-    s = math.copysign(1.0, torque)
-    while abs(kernel.spring_torque(s * hi, row, flags)) < abs(torque):
-        hi *= 2
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if abs(kernel.spring_torque(s * mid, row, flags)) < abs(torque):
-            lo = mid
-        else:
-            hi = mid
-    return s * 0.5 * (lo + hi)
-
-
-def stiffness(p: JointParams, torque: float = 0.0, hysteresis: bool = True) -> float:
-    """Small-signal torsional stiffness at the operating ``torque`` (N m), output N m/rad."""
-    k = spring_slope(p, torsion_at(p, torque))
-    if hysteresis and "hysteresis" in p.effects and p.hysteresis.model == "maxwell":
-        k += sum(p.hysteresis.element_stiffness)
-    return k
 
 
 def linearize(p: JointParams, *, torque: float = 0.0, motor_angle: float = 0.0,
@@ -95,13 +54,7 @@ def linearize(p: JointParams, *, torque: float = 0.0, motor_angle: float = 0.0,
         current_loop: model the amplifier's first-order current loop
             (otherwise the current follows the command at once).
     """
-    r = p.ratio
-    g = 1.0 / r
-    if "kinematic_error" in p.effects:
-        row = L.pack(p)
-        for k in range(int(row[L.NKE])):
-            n = row[L.KE_ORD + k]
-            g -= row[L.KE_AMP + k] * n * math.cos(n * motor_angle + row[L.KE_PH + k])
+    g = gear_factor(p, motor_angle)
     k = stiffness(p, torque, hysteresis)
     c = p.compliance.damping
     visc = "viscous_friction" in p.effects

@@ -4,6 +4,12 @@ measured in the same run, written to ``results/bench.md``.
 No benchmark here asserts a time: machines are shared and noisy. Each row
 states the measured value, the reference measured right beside it, and the
 target the issue set.
+
+Sections come from a registry (:func:`register_section`): hdgym's own
+(environments, discrepancy workflow) and those of the packages built on it,
+found through the entry-point group ``hdgym.bench_sections``
+(:mod:`hdgym.plugins`; ``agents`` adds Stable-Baselines3 training). hdgym
+imports none of those packages itself.
 """
 
 from __future__ import annotations
@@ -11,16 +17,71 @@ from __future__ import annotations
 import platform
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numba as nb
 import numpy as np
 
+from hdgym import plugins
 from hdgym.effects import flags_of
-from hdgym.params import JointParams, atomic_write_text, preset
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
+from hdgym.params import JointParams, preset
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 from hdgym.physics.lanes import PARALLEL_THRESHOLD, LaneBatch
+from hdgym.progress import bar
+
+#: a bench section: ``fn(quick) -> rows`` (one dict per row, as :func:`write_report` reads)
+SectionFn = Callable[[bool], list[dict]]
+
+
+@dataclass(frozen=True)
+class Section:
+    """A titled table of the bench page; sections are written by ``order``, then title."""
+
+    title: str
+    fn: SectionFn
+    order: float
+
+
+_SECTIONS: dict[str, Section] = {}
+
+
+def register_section(title: str, order: float = 50.0) -> Callable[[SectionFn], SectionFn]:
+    """Decorator: ``fn(quick) -> rows`` becomes the bench section ``title``.
+
+    hdgym's own sections use orders 10 (physics), 20 (environments) and 40
+    (discrepancy workflow); the soak runs (``--soak``) come after every section.
+    """
+
+    def deco(fn: SectionFn) -> SectionFn:
+        _SECTIONS[title] = Section(title, fn, float(order))
+        return fn
+
+    return deco
+
+
+def sections() -> tuple[list[Section], dict[str, str]]:
+    """The registered sections in page order, and the entry points that failed to load
+    (``{name: why}``: their sections are not measured)."""
+    failed = plugins.load(plugins.BENCH_SECTIONS)
+    return sorted(_SECTIONS.values(), key=lambda sec: (sec.order, sec.title)), failed
+
+
+@register_section("Gymnasium environments", order=20)
+def _envs(quick: bool) -> list[dict]:
+    from hdgym.envs.bench import bench_envs
+
+    return bench_envs(quick)
+
+
+@register_section("Discrepancy workflow", order=40)
+def _discrepancy(quick: bool) -> list[dict]:
+    from hdgym.discrepancy.bench import bench_diagnose
+
+    return bench_diagnose(quick)
 
 
 @nb.njit(cache=True, parallel=True, nogil=True)
@@ -103,8 +164,10 @@ def _fmt(v: float) -> str:
     return f"{v:,.0f}" if v >= 100 else f"{v:.3g}"
 
 
-def write_report(sections: dict[str, list[dict]], path: Path, command: str) -> None:
-    """Write the bench tables as markdown (atomically)."""
+def write_report(tables: dict[str, list[dict]], path: Path, command: str,
+                 not_measured: dict[str, str] | None = None) -> None:
+    """Write the bench tables as markdown (atomically); ``not_measured`` names the entry
+    points whose sections could not be loaded, and why."""
     lines = [
         "# hdgym benchmarks", "",
         f"Regenerate with `{command}`. Machine: {platform.machine()}, "
@@ -112,7 +175,9 @@ def write_report(sections: dict[str, list[dict]], path: Path, command: str) -> N
         f"numba {nb.__version__}, numpy {np.__version__}. Every ratio is against a reference "
         "measured in the same run.", "",
     ]
-    for title, rows in sections.items():
+    lines += [f"Not measured: the sections of `{name}` ({why})." for name, why in
+              (not_measured or {}).items()] + ([""] if not_measured else [])
+    for title, rows in tables.items():
         lines += [f"## {title}", "", "| benchmark | value | reference | reference value | ratio "
                   "| target | met |", "|---|---|---|---|---|---|---|"]
         for r in rows:
@@ -127,7 +192,9 @@ def write_report(sections: dict[str, list[dict]], path: Path, command: str) -> N
                 f"{r.get('target', '')} | {'' if met is None else ('yes' if met else 'NO')} |")
         notes = [r["note"] for r in rows if r.get("note")]
         lines += [""] + [f"- {n}" for n in notes] + ([""] if notes else [])
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    text = "\n".join(lines) + "\n"
+    moved = moved_section(Path(path), text)
+    atomic_write_text(path, text + ("\n" + moved if moved else ""))
 
 
 def bench_soak(quick: bool = False) -> list[dict]:
@@ -136,7 +203,7 @@ def bench_soak(quick: bool = False) -> list[dict]:
     from hdgym.params import preset_names
 
     rows = []
-    for name in preset_names():
+    for name in bar(preset_names(), "soak", unit="preset"):
         r = soak(preset(name), n_steps=100_000 if quick else 1_000_000)
         f, la = r["first"], r["last"]
         rows.append({
@@ -154,11 +221,9 @@ def bench_soak(quick: bool = False) -> list[dict]:
     return rows
 
 
-def run(quick: bool = False, out: Path = Path("results/bench.md"),
-        soak: bool = False) -> dict[str, list[dict]]:
-    """Run every benchmark and write the report (``soak`` adds the long soak runs)."""
+@register_section("Physics step (tuttle-joint1, every effect on)", order=10)
+def _physics(quick: bool) -> list[dict]:
     p = preset("tuttle-joint1")
-    sections: dict[str, list[dict]] = {}
     rows = bench_physics(p, quick)
     for r in rows:
         r["note"] = None
@@ -166,27 +231,16 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
         f"{r['name'].split(',')[1].strip()} {r['name'].split(',')[2].split()[0]} "
         f"{r['substeps_per_s']:,.0f}" for r in rows)
         + f" ({p.integration.n_substeps} substeps per 1 ms control period)")
-    sections["Physics step (tuttle-joint1, every effect on)"] = rows
-    try:
-        from hdgym.envs.bench import bench_envs
-    except ImportError:
-        bench_envs = None
-    if bench_envs is not None:
-        sections["Gymnasium environments"] = bench_envs(quick)
-    try:  # the SB3 layer (agents, extra "rl") sits above hdgym; only the report reaches up
-        from agents.bench import bench_sb3
-    except ImportError:
-        bench_sb3 = None
-    if bench_sb3 is not None:
-        sections["Stable-Baselines3 training"] = bench_sb3(quick)
-    try:
-        from hdgym.discrepancy.bench import bench_diagnose
-    except ImportError:
-        bench_diagnose = None
-    if bench_diagnose is not None:
-        sections["Discrepancy workflow"] = bench_diagnose(quick)
+    return rows
+
+
+def run(quick: bool = False, out: Path = Path("results/bench.md"),
+        soak: bool = False) -> dict[str, list[dict]]:
+    """Run every registered section and write the report (``soak`` adds the long soak runs)."""
+    registered, failed = sections()
+    tables = {sec.title: sec.fn(quick) for sec in bar(registered, "bench", unit="section")}
     if soak:
-        sections["Soak (issue: long runs)"] = bench_soak(quick)
-    write_report(sections, out, "hdgym bench" + (" --quick" if quick else "")
-                 + (" --soak" if soak else ""))
-    return sections
+        tables["Soak (issue: long runs)"] = bench_soak(quick)
+    write_report(tables, out, "hdgym bench" + (" --quick" if quick else "")
+                 + (" --soak" if soak else "") + f" --out {out}", not_measured=failed)
+    return tables

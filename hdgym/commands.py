@@ -92,7 +92,7 @@ def command_signal(spec: str | np.ndarray, time: np.ndarray,
 def _from_csv(path: str, time: np.ndarray) -> np.ndarray:
     from hdgym.record import read_record
 
-    rec = read_record(path)
+    rec = read_record(path, kind="command")  # two columns are enough: time,current_command
     if not rec.has("current_command"):
         raise ValueError(f"{path}: no column 'current_command'")
     return np.interp(time, rec.time - rec.time[0], rec.current_command)

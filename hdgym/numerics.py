@@ -118,8 +118,9 @@ def soak(p: JointParams, n_steps: int = 1_000_000, chunk: int = 50_000, seed: in
 def write_table(out: Path, quick: bool = False) -> None:
     """Convergence table of every preset as markdown (``hdgym numerics``)."""
     from hdgym.params import preset, preset_names
+    from hdgym.progress import bar
 
-    cmd = "hdgym numerics" + (" --quick" if quick else "")
+    cmd = "hdgym numerics" + (" --quick" if quick else "") + f" --out {out}"
     lines = ["# Substep convergence", "",
              f"Regenerate with `{cmd}`. Each preset runs {0.5 if quick else 2.0} s of random "
              "current (30 % of the amplifier limit mean, 40 % RMS) with every effect on; the "
@@ -128,7 +129,7 @@ def write_table(out: Path, quick: bool = False) -> None:
              "error non-monotone: a switching instant moves by up to one substep, and after a "
              "slip the two runs can part for a while. *Needs* is the smallest count whose "
              "torque RMS error is below 1 %.", ""]
-    for name in preset_names():
+    for name in bar(preset_names(), "numerics", unit="preset"):
         p = preset(name)
         rows = convergence(p, duration=0.5 if quick else 2.0)
         ok = [r["n_substeps"] for r in rows if not r["diverged"] and r["torque_rms"] < 0.01]

@@ -48,7 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from hdgym.params import GROUNDED, atomic_write_text
+from hdgym.files import atomic_write_text
+from hdgym.params import GROUNDED
 
 __all__ = [
     "DT_RTOL",
@@ -109,9 +110,11 @@ def _where(source: str, row: int | None = None, column: str | None = None,
 
 
 def _expected_names_hint(have: list[str], missing: str) -> str:
-    close = difflib.get_close_matches(missing, have, n=1, cutoff=0.6)
+    # a known column is itself, never a misspelling of another (motor_angle is no output_angle)
+    unknown = [h for h in have if h not in KNOWN_COLUMNS]
+    close = difflib.get_close_matches(missing, unknown, n=1, cutoff=0.6)
     if not close:
-        close = [h for h in have if h.lower().startswith(missing) or missing in h.lower()][:1]
+        close = [h for h in unknown if h.lower().startswith(missing) or missing in h.lower()][:1]
     hint = (f"expected column names ({_UNITS}): {', '.join(KNOWN_COLUMNS)}")
     if close:
         hint = (f"{close[0]!r} is not {missing!r}: rename the column to exactly {missing!r} "
@@ -469,9 +472,13 @@ class Record:
             raise RecordError(f"{path}: cannot write: {reason}") from exc
 
     @classmethod
-    def from_text(cls, text: str, source: str = "<text>") -> Record:
-        """Parse CSV ``text`` (see the module docstring); ``source`` names it in errors."""
-        columns, meta, first_line = _parse(text, source)
+    def from_text(cls, text: str, source: str = "<text>", kind: str | None = None) -> Record:
+        """Parse CSV ``text`` (see the module docstring); ``source`` names it in errors.
+
+        ``kind`` is the ``# kind:`` of a file that does not say (``"command"``:
+        only ``time`` and ``current_command`` are required).
+        """
+        columns, meta, first_line = _parse(text, source, kind)
         columns, meta = Record.validate(columns, meta, source=source, first_line=first_line)
         rec = object.__new__(cls)
         object.__setattr__(rec, "columns", columns)
@@ -480,8 +487,11 @@ class Record:
         return rec
 
     @classmethod
-    def from_csv(cls, path: str | os.PathLike[str]) -> Record:
-        """Read and validate a record file; :class:`RecordError` on any problem."""
+    def from_csv(cls, path: str | os.PathLike[str], kind: str | None = None) -> Record:
+        """Read and validate a record file; :class:`RecordError` on any problem.
+
+        ``kind``: as in :meth:`from_text`.
+        """
         source = str(path)
         try:
             raw = Path(path).read_bytes()
@@ -497,19 +507,23 @@ class Record:
             row = raw.count(b"\n", 0, exc.start) + 1
             raise RecordError(f"{source}: row {row}: not UTF-8 text (byte "
                               f"{raw[exc.start:exc.start + 1]!r} at offset {exc.start})") from None
-        return cls.from_text(text, source)
+        return cls.from_text(text, source, kind)
 
 
-def read_record(path: str | os.PathLike[str]) -> Record:
+def read_record(path: str | os.PathLike[str], kind: str | None = None) -> Record:
     """Read and validate a record file (same as :meth:`Record.from_csv`)."""
-    return Record.from_csv(path)
+    return Record.from_csv(path, kind)
 
 
 # ------------------------------------------------------------------ parsing
 
 
-def _parse(text: str, source: str) -> tuple[dict[str, np.ndarray], dict[str, str], int]:
-    """Split CSV text into columns; return them, the metadata and the first data line."""
+def _parse(text: str, source: str, kind: str | None = None
+           ) -> tuple[dict[str, np.ndarray], dict[str, str], int]:
+    """Split CSV text into columns; return them, the metadata and the first data line.
+
+    ``kind``: the ``# kind:`` of a file that does not say.
+    """
     if "\r" in text:
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     if text.startswith("\ufeff"):
@@ -548,6 +562,8 @@ def _parse(text: str, source: str) -> tuple[dict[str, np.ndarray], dict[str, str
             continue
         header_line = line_no
         break
+    if kind is not None:
+        meta.setdefault("kind", kind)
     if header_line is None:
         raise RecordError(f"{source}: no header row (only metadata lines); the first line "
                           f"after the '# key: value' lines must name the columns, e.g. "

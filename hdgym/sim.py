@@ -8,6 +8,9 @@ first state reproduces it.
 
 from __future__ import annotations
 
+import math
+import numbers
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -21,6 +24,25 @@ from hdgym.params import JointParams
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 from hdgym.record import Record
+
+BYTES_PER_PERIOD = 8 * (2 * L.N_STATE + 2 * len(CHANNELS) + 8)
+"""Memory a run takes per control period (states, measurements, record columns, copies)."""
+
+
+def _memory_bytes() -> int:
+    """Physical memory of this machine, bytes (a large number where unknown)."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 1 << 40
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError  # pragma: no cover
 
 
 class SimulationError(RuntimeError):
@@ -93,9 +115,27 @@ class Simulator:
         return L.initial_state(self.row[None, :], self.flags, motor_angle, out)[0]
 
     def time(self, duration: float) -> np.ndarray:
-        n = int(round(duration / self.ctrl_dt))
+        """Sample times of a run of ``duration`` s (one per control period).
+
+        Raises:
+            ValueError: naming ``duration`` if it is not a finite number of
+                seconds, shorter than two control periods, or longer than this
+                machine's memory can hold as a record (checked before allocating).
+        """
+        if isinstance(duration, bool) or not isinstance(duration, numbers.Real):
+            raise ValueError(f"duration must be a number of seconds, got {duration!r} "
+                             f"({type(duration).__name__})")
+        if not math.isfinite(duration):
+            raise ValueError(f"duration must be a finite number of seconds, got {duration!r}")
+        n = round(duration / self.ctrl_dt)
         if not (duration > 0 and n >= 2):
-            raise ValueError(f"duration must be at least two control periods, got {duration!r} s")
+            raise ValueError(f"duration must be at least two control periods "
+                             f"({2 * self.ctrl_dt:g} s), got {duration!r} s")
+        need, have = n * BYTES_PER_PERIOD, _memory_bytes()
+        if need > have:
+            raise ValueError(f"duration {duration:g} s is {n:,} control periods of "
+                             f"{self.ctrl_dt:g} s, a record of about {_size(need)}, more than "
+                             f"this machine's {_size(have)} of memory; run it in shorter pieces")
         return np.arange(n) * self.ctrl_dt
 
     def run(self, command: str | np.ndarray, duration: float | None = None, *, seed: int = 0,

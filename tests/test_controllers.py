@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers import benchmark, scenarios, tuning
+from controllers import experiments, scenarios, tuning
 from controllers.adapter import ControllerPolicy
 from controllers.dob import DisturbanceObserver
 from controllers.filters import notch
@@ -22,7 +22,7 @@ pytestmark = pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarn
 
 @pytest.fixture(scope="module")
 def cfg() -> dict[str, float]:
-    return benchmark.settings(quick=True)
+    return experiments.settings(quick=True)
 
 
 # ------------------------------------------------------------------ PID law
@@ -191,11 +191,11 @@ def test_loop_margins_agree_with_python_control_without_overflow() -> None:
 
 @pytest.fixture(scope="module")
 def tracking(cfg) -> dict[str, dict]:
-    return {name: benchmark.tracking(preset(name), cfg, benchmark.PRIMARY[name])
-            for name in benchmark.JOINTS}
+    return {name: experiments.tracking(preset(name), cfg, experiments.PRIMARY[name])
+            for name in experiments.JOINTS}
 
 
-@pytest.mark.parametrize("name", benchmark.JOINTS)
+@pytest.mark.parametrize("name", experiments.JOINTS)
 def test_ke_feedforward_from_identified_model(tracking, name: str) -> None:
     tr = tracking[name]
     p = preset(name)
@@ -206,13 +206,13 @@ def test_ke_feedforward_from_identified_model(tracking, name: str) -> None:
     dominant = max(true, key=true.get)
     assert amps[min(amps, key=lambda o: abs(o - dominant))] == pytest.approx(true[dominant],
                                                                             rel=0.1)
-    assert tr["reduction"]["PID + KE feedforward"] >= benchmark.KE_TARGET
+    assert tr["reduction"]["PID + KE feedforward"] >= experiments.KE_TARGET
 
 
-@pytest.mark.parametrize("name", benchmark.JOINTS)
+@pytest.mark.parametrize("name", experiments.JOINTS)
 def test_repetitive_control_converges_and_survives_speed_change(tracking, name: str) -> None:
     tr = tracking[name]
-    assert tr["reduction"]["PID + repetitive"] >= benchmark.RC_TARGET
+    assert tr["reduction"]["PID + repetitive"] >= experiments.RC_TARGET
     conv = np.array(tr["convergence"])
     assert conv[-1, 1] < 0.2 * conv[2, 1] or conv[2, 1] < 0.2 * conv[2, 2]  # it learnt
     sweep = tr["sweep_rms"]
@@ -227,9 +227,9 @@ def test_repetitive_stability_condition_is_checked() -> None:
 
 
 def test_dob_halves_load_step_deviation(cfg) -> None:
-    res = benchmark.load_step(preset("tuttle-joint1"), cfg)
+    res = experiments.load_step(preset("tuttle-joint1"), cfg)
     m = res["metrics"]
-    assert res["reduction"] >= benchmark.DOB_TARGET
+    assert res["reduction"] >= experiments.DOB_TARGET
     assert m["PID + DOB"]["recovery"] < m["PID"]["recovery"]
 
 

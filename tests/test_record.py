@@ -491,3 +491,36 @@ def test_command_file_drives_the_simulator(tmp_path):
     Record({"time": t, "current_command": np.full(300, 2.0)}, {"kind": "command"}).to_csv(path)
     rec = Simulator(preset("tuttle-joint1")).run(str(path), 0.3)
     assert np.all(rec.current_command == 2.0)
+
+
+# --- issue 13 items 5, 6 ----------------------------------------------------------------------
+
+def test_missing_output_angle_does_not_suggest_motor_angle(tmp_path):
+    f = tmp_path / "r.csv"
+    f.write_text("time,current_command,motor_angle\n0,0,0\n0.001,0,0\n")
+    with pytest.raises(RecordError) as exc:
+        read_record(f)
+    msg = str(exc.value)
+    assert "missing required column 'output_angle'" in msg
+    assert "rename" not in msg and "'motor_angle' is not" not in msg
+
+
+def test_misspelt_column_still_gets_a_hint(tmp_path):
+    f = tmp_path / "r.csv"
+    f.write_text("time,motor_angle,output_angel\n0,0,0\n0.001,0,0\n")
+    with pytest.raises(RecordError, match="'output_angel' is not 'output_angle'"):
+        read_record(f)
+
+
+def test_two_column_command_file_drives_the_simulator(tmp_path):
+    from hdgym.cli import main
+
+    cmd = tmp_path / "cmd.csv"
+    cmd.write_text("time,current_command\n0,0.5\n0.05,1.0\n0.1,1.0\n")
+    out = tmp_path / "run.csv"
+    assert main(["simulate", "--preset", "tuttle-joint1", "--command", str(cmd),
+                 "--duration", "0.1", "--out", str(out)]) == 0
+    u = read_record(out).current_command
+    assert u[0] == 0.5 and u[-1] == 1.0
+    with pytest.raises(RecordError, match="missing required column 'motor_angle'"):
+        read_record(cmd)  # as a record it is still incomplete

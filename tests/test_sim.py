@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from conftest import make_joint
@@ -105,3 +107,28 @@ def test_record_load_column_resimulates(joint):
     a = sim.run("step:3", 0.3, load_torque="sine:20:5")
     b = sim.run(a.current_command, load_torque=a.load_torque)
     assert a == b
+
+
+# --- bad arguments name themselves (issue 13 item 6) ------------------------------------------
+
+@pytest.mark.parametrize("duration, words", [
+    (float("nan"), "duration must be a finite number of seconds, got nan"),
+    ("4", "duration must be a number of seconds, got '4' (str)"),
+    (True, "duration must be a number of seconds"),
+    (1e9, "duration 1e+09 s is 1,000,000,000,000 control periods"),
+])
+def test_run_names_a_bad_duration(duration, words):
+    from hdgym.params import preset
+
+    with pytest.raises(ValueError, match=re.escape(words)):
+        Simulator(preset("tuttle-joint1")).run("step:1", duration)
+
+
+def test_too_long_is_refused_before_allocating():
+    from hdgym.params import preset
+    from hdgym.sim import BYTES_PER_PERIOD, _memory_bytes
+
+    sim = Simulator(preset("tuttle-joint1"))
+    periods = _memory_bytes() // BYTES_PER_PERIOD + 10
+    with pytest.raises(ValueError, match="more than this machine's"):
+        sim.time(periods * sim.ctrl_dt)

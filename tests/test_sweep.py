@@ -15,8 +15,14 @@ from conftest import make_joint
 from hdgym import params as P
 from hdgym.sweep import load_spec, run_sweep, spec_names, spec_path
 from hdgym.sweep.backends import run_job
-from hdgym.sweep.scenarios import register, scenario_names
-from hdgym.sweep.spec import draw_params, find_line, parse_spec
+from hdgym.sweep.job import draw_params
+from hdgym.sweep.scenarios import (
+    get_scenario,
+    register,
+    register_controller_scenario,
+    scenario_names,
+)
+from hdgym.sweep.spec import find_line, parse_spec
 from hdgym.sweep.store import ResultsStore, read_rows
 
 SPEC = """\
@@ -233,6 +239,9 @@ def test_local_sweep_writes_resumes_and_summarizes(tmp_path: Path, spec_file: Pa
 
     md = (out / "summary.md").read_text()
     assert "| tuttle-joint1 | – | torque_rms | 4 |" in md
+    # it replaced the first run's page, with the same rows: it says nothing moved
+    assert "## What moved since the previous run" in md
+    assert " 0 of " in md.partition("## What moved")[2].splitlines()[2]
     assert "Regenerate: `hdgym sweep" in md
     assert (out / "summary.png").stat().st_size > 10_000
 
@@ -354,30 +363,27 @@ def test_controllers_meet_the_same_drive(tmp_path: Path) -> None:
         load_spec(bad)
 
 
-def test_benchmark_scenarios_table_is_used_when_present(tmp_path: Path,
-                                                        monkeypatch: pytest.MonkeyPatch) -> None:
-    import sys
-    import types
-
+def test_controller_scenario_gets_the_arguments_it_accepts(tmp_path: Path) -> None:
     calls = []
 
     def tracking(params, controller, seed, quick, speed=1.0):  # noqa: ANN001
         calls.append((controller["name"], seed, quick, speed))
         return {"rms_error": 1e-3 * speed, "ok": 1}
 
-    fake = types.ModuleType("controllers.benchmark")
-    fake.SCENARIOS = {"tracking": tracking}
-    monkeypatch.setitem(sys.modules, "controllers.benchmark", fake)
-    if "controllers" in sys.modules:
-        monkeypatch.setattr(sys.modules["controllers"], "benchmark", fake, raising=False)
-    assert "controllers:tracking" in scenario_names()
+    def check(config):  # noqa: ANN001
+        if config.get("name") == "bad":
+            raise ValueError("name must not be bad")
+
+    register_controller_scenario("fake_controllers:tracking", tracking, check)
+    assert "fake_controllers:tracking" in scenario_names()
+    assert get_scenario("fake_controllers:tracking").options == {"speed": 1.0}
     f = tmp_path / "bm.toml"
     f.write_text(textwrap.dedent("""\
         [sweep]
         presets = ["tuttle-joint1"]
-        scenarios = ["controllers:tracking"]
+        scenarios = ["fake_controllers:tracking"]
         seeds = 2
-        [scenario."controllers:tracking"]
+        [scenario."fake_controllers:tracking"]
         speed = 2.0
         [[controllers]]
         name = "a"
@@ -390,3 +396,7 @@ def test_benchmark_scenarios_table_is_used_when_present(tmp_path: Path,
     # the same seed gives both controllers the same run seed
     assert len({c[1] for c in calls}) == 2 and all(c[3] == 2.0 for c in calls)
     assert {r["rms_error"] for r in _rows(tmp_path / "out").values()} == {"0.002"}
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f.read_text().replace('name = "b"', 'name = "bad"'))
+    with pytest.raises(ValueError, match=r"bad\.toml, line 9: .*name must not be bad"):
+        load_spec(bad)

@@ -8,7 +8,7 @@ hidden effect(s) first and cuts the validation NMSE by at least 80 %.
 
 Regenerate the table with::
 
-    python -m hdgym.discrepancy.cases [--quick]      # -> results/discrepancy.md
+    python -m hdgym.discrepancy.cases [--quick]      # -> runs/discrepancy.md (--out to change)
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hdgym.files import check_out
 from hdgym.params import (
     Amplifier,
     Compliance,
@@ -220,9 +221,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hdgym.discrepancy.cases",
                                  description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer least-squares iterations")
-    ap.add_argument("--out", default="results/discrepancy.md")
+    ap.add_argument("--out", default="runs/discrepancy.md",
+                    help="page to write (default %(default)s; the committed page: "
+                    "--out results/discrepancy.md; never with --quick)")
     ap.add_argument("--only", nargs="*", help="case names to run")
     args = ap.parse_args(argv)
+    check_out(args.out, args.quick)
     cases = [c for c in all_cases() if not args.only or c.name in args.only]
     results = []
     for c in cases:

@@ -16,7 +16,7 @@ decided it); the torque constant is the file's own ``torque_Nm / iq_A``.
 Metadata: ``source``, ``licence``, ``loop: closed`` (so the workflow compares
 in the torque domain), ``ratio``.
 
-``python -m hdgym.discrepancy.realdata [--data DIR] [--out results/real-data]``
+``python -m hdgym.discrepancy.realdata [--data DIR] [--out runs/real-data]``
 writes the drive's parameter file and runs the workflow on the sweep.
 """
 
@@ -176,7 +176,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hdgym.discrepancy.realdata",
                                  description="run the discrepancy workflow on the ZXF17 sweep")
     ap.add_argument("--data", default=str(DATA))
-    ap.add_argument("--out", default="results/real-data")
+    ap.add_argument("--out", default="runs/real-data",
+                    help="folder (default %(default)s; committed: --out results/real-data)")
     args = ap.parse_args(argv)
     data = Path(args.data)
     sweeps = sorted(data.glob("friction_sweep_*.csv"))

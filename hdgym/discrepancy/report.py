@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hdgym.files import umask_mode
+
 from . import residuals as R
 from .workflow import Diagnosis
 
@@ -290,6 +292,7 @@ def write_report(diag: Diagnosis, out: Path, *, notes: list[str] | None = None,
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    tmp.chmod(umask_mode(directory=True))  # mkdtemp's private 0700 would stay on the report
     try:
         js = to_json(diag, notes)
         _figures(diag, tmp)

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hdgym.params import JointParams
+from hdgym.progress import bar
 from hdgym.record import Record, read_record
 from hdgym.sim import SimulationError
 
@@ -352,15 +353,18 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     nfev_base, nfev_trial, nfev_polish = (20, 10, 20) if quick else (40, 15, 30)
     untestable = [n for n, e in REGISTRY.items() if not e.testable(problem.scales)]
 
+    prog = bar(total=max_steps + 1, desc="diagnose", unit="fit")
     given = problem.nmse(params)
     base_paths = [fp.path for fp in model_params(params, problem.scales, params)]
     before = fit(problem, params, model_params(params, problem.scales, params),
                  max_nfev=nfev_base)
     current = before
+    prog.update(1)
     steps: list[Step] = []
     conclusion = ""
     candidates: list[dict] = []
     for _ in range(max_steps):
+        prog.set_postfix_str(f"{len(steps)} effect(s) added", refresh=False)
         # control refit: the same iteration budget without a new effect, so a candidate is
         # credited only with what the effect adds, not with a longer optimization
         control = fit(problem, current.params,
@@ -454,8 +458,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                           (current.cost - polished.cost) / current.cost, candidates,
                           polished.params))
         current = polished
+        prog.update(1)
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
+    prog.close()
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)

@@ -343,12 +343,15 @@ def scalar_action(action: Any) -> float:
     vector env calls): NaN/inf raise ``ValueError``, values beyond +-1
     saturate like the amplifier.
     """
-    if type(action) is np.ndarray and action.shape == (1,):
+    if type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind in "iuf":
         a = float(action[0])
-    else:
-        arr = np.asarray(action, dtype=float).reshape(-1)
-        if arr.size != 1:
-            raise ValueError(f"action must hold one value, got shape {np.shape(action)}")
+    else:  # what Box((1,)) can hold: one real number in an array (or list) of shape (1,)
+        arr = np.asarray(action) if isinstance(action, (np.ndarray, list, tuple)) else None
+        if arr is None or arr.dtype.kind not in "iuf" or arr.shape != (1,):
+            what = (f"shape {arr.shape}, dtype {arr.dtype}" if arr is not None
+                    else type(action).__name__)
+            raise ValueError(f"action must be an array of shape (1,) holding one real number "
+                             f"(the action space is Box(-1, 1, (1,))), got {action!r} ({what})")
         a = float(arr[0])
     if not math.isfinite(a):
         raise ValueError(f"action must be finite, got {action!r}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import fields, is_dataclass
@@ -11,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from hdgym.effects import EFFECTS
+from hdgym.files import atomic_write_text
 from hdgym.params.joint import JointParams
 from hdgym.params.parts import PARTS, FrictionSide, Harmonic, Ripple
 
@@ -143,20 +143,6 @@ def load(path: str | os.PathLike[str]) -> JointParams:
     except OSError as exc:
         raise ValueError(f"{path}: cannot read: {exc.strerror}") from None
     return loads(text, str(path))
-
-
-def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def save(p: JointParams, path: str | os.PathLike[str]) -> None:

@@ -24,12 +24,15 @@ MAX_SLIP_ELEMENTS = 8
 
 
 def finite(obj: Any, prefix: str) -> None:
-    """Every float in a dataclass must be finite; the error names the field."""
+    """Every number in a dataclass must be a finite number; the error names the field."""
     for f in fields(obj):
         value = getattr(obj, f.name)
         values = value if isinstance(value, tuple) else (value,)
+        numeric = str(f.type) in ("float", "int") or str(f.type).startswith("tuple[float")
         for v in values:
             if isinstance(v, bool) or not isinstance(v, (int, float)):
+                if numeric:  # e.g. resistance = "3.4" in a TOML file
+                    raise ValueError(f"{prefix}.{f.name} must be a number, got {v!r}")
                 continue
             if not math.isfinite(v):
                 raise ValueError(f"{prefix}.{f.name} must be finite, got {v!r}")

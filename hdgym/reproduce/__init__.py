@@ -48,7 +48,7 @@ def run(which: str, out: Path, quick: bool = False) -> bool:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results = [(paper, run_items(paper, out, quick)) for paper in papers]
-    write_page(out, f"hdgym reproduce {which}", results, quick)
+    write_page(out, f"hdgym reproduce {which} --out {out}", results, quick)
     return all(it.passed for _, items in results for it in items)
 
 

@@ -77,8 +77,10 @@ class Paper:
 
 def run_items(paper: Paper, out: Path, quick: bool) -> list[Item]:
     """Every item of ``paper``; an item that raises is reported as a FAIL, not fatal."""
+    from hdgym.progress import bar
+
     items = []
-    for k, check in enumerate(paper.items):
+    for k, check in enumerate(bar(paper.items, f"reproduce {paper.name}", unit="item")):
         try:
             items.append(check(out, quick))
         except Exception as exc:  # a failing check is reported, not fatal to the page

@@ -16,8 +16,9 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from hdgym.sweep.job import Job
 from hdgym.sweep.runner import SweepResult, run_sweep
-from hdgym.sweep.spec import Job, SweepSpec, load_spec
+from hdgym.sweep.spec import SweepSpec, load_spec
 
 __all__ = ["Job", "SweepResult", "SweepSpec", "load_spec", "run_sweep", "spec_names",
            "spec_path"]

@@ -1,6 +1,6 @@
 """Where jobs run: a local process pool (default) or Ray tasks.
 
-Both backends run :func:`run_job` on each :class:`~hdgym.sweep.spec.Job`
+Both backends run :func:`run_job` on each :class:`~hdgym.sweep.job.Job`
 and yield result rows as jobs finish (in completion order), keeping a
 bounded number of jobs in flight so an interrupted sweep loses little and
 memory stays flat for large sweeps.
@@ -23,7 +23,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from importlib import metadata
 from typing import Any
 
-from hdgym.sweep.spec import Job, draw_params
+from hdgym.sweep.job import Job, draw_params
 
 __all__ = ["BACKENDS", "FIXED_COLUMNS", "iter_results", "run_job"]
 

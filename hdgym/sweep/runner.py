@@ -5,14 +5,17 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, replace
+from importlib import resources
 from pathlib import Path
 
-from hdgym.params import atomic_write_text
+from hdgym.files import atomic_write_text, check_out
 from hdgym.sweep.backends import BACKENDS, FIXED_COLUMNS, iter_results, param_columns
 from hdgym.sweep.spec import SweepSpec, load_spec
 from hdgym.sweep.store import ResultsStore
 
 __all__ = ["SweepResult", "run_sweep"]
+
+_BUNDLED = resources.files("hdgym.sweep.specs")
 
 
 @dataclass(frozen=True)
@@ -45,11 +48,11 @@ def _copy_spec(spec: SweepSpec, out_dir: Path) -> None:
 def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local",
               address: str | None = None, workers: int | None = None, *,
               quick: bool | None = None, summarize: bool = True,
-              progress: bool = True) -> SweepResult:
+              progress: bool = True, summary_dir: str | Path | None = None) -> SweepResult:
     """Run the sweep ``spec_path`` into ``out_dir`` (resuming if it has results).
 
     Args:
-        spec_path: the spec TOML (see :mod:`hdgym.sweep.spec`).
+        spec_path: the spec TOML (see :mod:`hdgym.sweep.spec`) or a bundled spec's name.
         out_dir: gets ``results.csv`` (one row per job), ``spec.toml`` and the
             summary (``summary.md``, ``summary.png``; also
             ``<summary_dir>/<name>.md/.png`` when the spec sets ``summary_dir``).
@@ -60,6 +63,8 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
         quick: override the spec's ``quick`` key (shorter runs).
         summarize: write the summary at the end.
         progress: show a progress bar and a closing line.
+        summary_dir: also copy the summary to ``<summary_dir>/<name>.md/.png``
+            (default: the spec's ``summary_dir``, if any).
 
     Raises:
         ValueError: a bad spec (naming file and line) or bad arguments, before
@@ -71,7 +76,15 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
         raise ValueError(f"workers must be >= 1, got {workers}")
     if address is not None and backend != "ray":
         raise ValueError("--address is for --backend ray")
-    spec = load_spec(spec_path, quick=quick)
+    bundled = _BUNDLED.joinpath(f"{spec_path}.toml")
+    if not Path(spec_path).exists() and bundled.is_file():  # a bundled spec's name
+        spec_file: str | Path = Path(str(bundled))
+    else:
+        spec_file = spec_path
+    spec = load_spec(spec_file, quick=quick)
+    check_out(out_dir, spec.quick)  # results/ policy: quick runs never write there
+    if summary_dir is not None or spec.summary_dir is not None:
+        check_out(summary_dir or spec.summary_dir, spec.quick, "summary_dir")
     jobs = spec.jobs()
     ids = [j.job_id for j in jobs]
     if len(set(ids)) != len(ids):  # pragma: no cover - the spec forbids duplicates
@@ -111,12 +124,15 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     if summarize:
         from hdgym.sweep.summary import summarize as _summarize
 
-        if quick is None:
-            command = f"hdgym sweep {spec_path} --out {out_dir}"
-        else:  # the CLI has no --quick: say it in Python
+        command = f"hdgym sweep {spec_path} --out {out_dir}"
+        if summary_dir is not None:
+            command += f" --summary-dir {summary_dir}"
+        if quick:
+            command += " --quick"
+        elif quick is not None:  # the CLI has no flag for quick=False: say it in Python
             command = (f"python -c \"from hdgym.sweep import run_sweep; "
-                       f"run_sweep('{spec_path}', '{out_dir}', quick={quick})\"")
-        summary = _summarize(out_dir, command=command)
+                       f"run_sweep('{spec_path}', '{out_dir}', quick=False)\"")
+        summary = _summarize(out_dir, command=command, dest=summary_dir)
     if progress:
         print(f"sweep {spec.name}: {len(jobs)} jobs, {skipped} already done, {ran} run "
               f"({errors} errors) in {seconds:.1f} s on {backend}; "

@@ -3,14 +3,17 @@
 A scenario runs one job on one (possibly randomized) drive and returns flat
 metrics (SI units, the unit in the docstring). It draws randomness only from
 ``job.run_rng()`` / ``job.run_seed()`` so a job is reproducible from its
-inputs. Three families:
+inputs. Where scenarios come from:
 
 * built-in open-loop scenarios that need only the simulator
   (``current_steps``, ``locked_random``);
-* ``controllers:NAME`` -- the scenario ``NAME`` of
-  ``controllers.benchmark.SCENARIOS``, run with each ``[[controllers]]``
-  config of the spec, designed on the nominal drive (imported lazily, when a
-  spec names one; see the adapter below);
+* the packages built on hdgym, through the entry-point group
+  ``hdgym.sweep_scenarios`` (:mod:`hdgym.plugins`): ``controllers`` adds
+  ``controllers:tracking``, ``controllers:load_step`` and
+  ``controllers:point_to_point`` (:mod:`controllers.sweep`, run once per
+  ``[[controllers]]`` config through :func:`register_controller_scenario`),
+  ``agents`` adds ``rl_train`` (:mod:`agents.sweep`, once per
+  ``[[agents]]`` config). hdgym imports neither;
 * ``package.module:function`` -- any importable function ``(params, job) ->
   metrics``; imported lazily in the workers, so it works on a process pool
   and on Ray nodes (a function registered only in ``__main__`` would not);
@@ -36,9 +39,11 @@ from typing import Any
 
 import numpy as np
 
+from hdgym import plugins
 from hdgym.params import JointParams
 
-__all__ = ["Scenario", "check_options", "get_scenario", "register", "scenario_names"]
+__all__ = ["OptionError", "Scenario", "check_options", "get_scenario", "register",
+           "register_controller_scenario", "scenario_names"]
 
 ScenarioFn = Callable[[JointParams, Any], Mapping[str, float]]
 
@@ -97,22 +102,25 @@ def register(name: str, *, needs: str | None = None, options: Mapping[str, Any] 
 
 
 def scenario_names() -> list[str]:
-    """Registered names, plus ``controllers:NAME`` for each benchmark scenario if available."""
-    return sorted(_REGISTRY) + [f"controllers:{n}" for n in _controller_scenarios()]
+    """Registered names, those of the installed packages' entry points included."""
+    plugins.load(plugins.SWEEP_SCENARIOS)
+    return sorted(_REGISTRY)
 
 
 def get_scenario(name: str) -> Scenario:
     """The scenario called ``name`` (raises ValueError if unknown)."""
     if name in _REGISTRY:
         return _REGISTRY[name]
-    if name.startswith("controllers:"):
-        return _controller_scenario(name.partition(":")[2])
+    failed = plugins.load(plugins.SWEEP_SCENARIOS)
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    why = "".join(f"; entry point {ep!r}: {msg}" for ep, msg in failed.items())
     if ":" in name:
-        return _imported_scenario(name)
-    raise ValueError(f"unknown scenario {name!r}")
+        return _imported_scenario(name, why)
+    raise ValueError(f"unknown scenario {name!r}{why}")
 
 
-def _imported_scenario(name: str) -> Scenario:
+def _imported_scenario(name: str, why: str = "") -> Scenario:
     """``package.module:function`` -- a scenario any worker (pool, Ray node) can import.
 
     The function takes ``(params, job)`` and returns metrics; its optional
@@ -126,10 +134,12 @@ def _imported_scenario(name: str) -> Scenario:
     try:
         mod = importlib.import_module(mod_name)
     except ImportError as exc:
-        raise ValueError(f"unknown scenario {name!r} (cannot import {mod_name!r}: {exc})") from None
+        raise ValueError(f"unknown scenario {name!r} (cannot import {mod_name!r}: {exc}){why}"
+                         ) from None
     fn = getattr(mod, fn_name, None)
     if not callable(fn):
-        raise ValueError(f"unknown scenario {name!r} ({mod_name} has no function {fn_name!r})")
+        raise ValueError(f"unknown scenario {name!r} ({mod_name} has no function {fn_name!r})"
+                         f"{why}")
     for sc in _REGISTRY.values():
         if sc.fn is fn:
             return Scenario(name, sc.fn, sc.needs, sc.options, sc.check_slot, sc.doc)
@@ -227,126 +237,18 @@ def locked_random(params: JointParams, job: Any) -> dict[str, float]:
             "torque_per_amp": t_rms / c_rms if c_rms > 0 else float("nan")}
 
 
-# ------------------------------------------------------------ RL training (agents)
-
-RL_KEYS = {"name": "", "config": "", "total_timesteps": 0, "quick_timesteps": 0, "n_envs": 0,
-           "eval_episodes": 0, "randomize": {}}
-RL_QUICK_TIMESTEPS = 2048
-RL_EVAL_EPISODES = 8
-RL_QUICK_EVAL_EPISODES = 4
-
-
-def _check_agent(config: Mapping[str, Any]) -> None:
-    for key, value in config.items():
-        if key not in RL_KEYS:
-            raise OptionError(f"unknown key {key!r}; known: {', '.join(sorted(RL_KEYS))}", key)
-        default = RL_KEYS[key]
-        if isinstance(default, int) and not (isinstance(value, int) and not isinstance(value, bool)
-                                             and value > 0):
-            raise OptionError(f"{key} must be a whole number > 0, got {value!r}", key)
-        if isinstance(default, dict) and not isinstance(value, dict):
-            raise OptionError(f"{key} must be a table of dotted path = spread", key)
-    if "config" not in config or not isinstance(config["config"], str):
-        raise OptionError("needs config = \"<bundled agents config name or .toml path>\"",
-                          "name")
-    try:
-        from agents.common import config_path
-    except ImportError as exc:
-        raise OptionError(f"rl_train needs the agents package and the [rl] extra: {exc}",
-                          "config") from None
-    try:
-        config_path(config["config"])
-    except ValueError as exc:
-        raise OptionError(str(exc), "config") from None
-
-
-@register("rl_train", needs="agent", options={}, check_slot=_check_agent)
-def rl_train(params: JointParams, job: Any) -> dict[str, float]:
-    """Train an SB3 policy on the job's drive and evaluate it: ``reached``, ``trapped``,
-    ``terminated`` (fractions of episodes), ``time_to_target_s`` (s), ``peak_torque_mean``,
-    ``peak_torque_max`` (N m, flexspline), ``max_speed_deg_s`` (deg/s), ``agent_steps``.
-
-    Training is :func:`agents.train.train`, evaluation :func:`agents.evaluate.evaluate`.
-
-    One job per ``[[agents]]`` config and seed. The config's env runs on the
-    job's (randomized) drive; the SB3 seed is the job's seed, as
-    ``python -m agents.train --seed N``. ``quick`` trains ``quick_timesteps``
-    (default 2048) agent steps. The policy goes to
-    ``DIR/jobs/<job_id>/final.zip``. Evaluation runs ``eval_episodes``
-    episodes seeded from the job (default 8, quick 4).
-    """
-    import copy
-    import tempfile
-    from pathlib import Path
-
-    from agents.common import load_config, load_policy
-    from agents.evaluate import evaluate
-    from agents.train import train
-
-    agent = dict(job.agent or {})
-    cfg = copy.deepcopy(load_config(agent["config"]))
-    t = cfg["train"]
-    t["seed"] = int(job.seed)
-    t["eval_freq"] = 0  # the sweep evaluates once at the end
-    t["checkpoint_freq"] = 0
-    if job.quick:
-        t["total_timesteps"] = int(agent.get("quick_timesteps", RL_QUICK_TIMESTEPS))
-    elif "total_timesteps" in agent:
-        t["total_timesteps"] = int(agent["total_timesteps"])
-    if "n_envs" in agent:
-        t["n_envs"] = int(agent["n_envs"])
-    kw = cfg["env"].setdefault("kwargs", {})
-    kw["preset"] = params
-    if "randomize" in agent:
-        kw["randomize"] = dict(agent["randomize"])
-    n_eval = int(agent.get("eval_episodes",
-                           RL_QUICK_EVAL_EPISODES if job.quick else RL_EVAL_EPISODES))
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(job.workdir) / job.job_id if job.workdir else Path(tmp)
-        summary = train(cfg, out, progress=False)
-        model = load_policy(Path(summary["final_policy"]))
-        stats, _ = evaluate(cfg, ["policy"], n_eval, 1_000_000 + job.run_seed() % 1_000_000,
-                            model)
-    s = stats[0]
-    return {"reached": s.reached, "trapped": s.trapped, "terminated": s.terminated,
-            "time_to_target_s": s.time_to_target_s, "peak_torque_mean": s.peak_torque_mean,
-            "peak_torque_max": s.peak_torque_max, "max_speed_deg_s": s.max_speed_deg_s,
-            "agent_steps": float(summary["agent_steps"])}
-
-
-# ------------------------------------------------- controllers.benchmark adapter
+# ------------------------------------------------ one run per controller config
 #
-# ``controllers:NAME`` runs ``controllers.benchmark.SCENARIOS[NAME]`` once per
-# ``[[controllers]]`` config. The function is called with the keyword
-# arguments it accepts of: ``params`` (the job's randomized drive),
-# ``nominal`` (the preset at the grid point, no spreads: what a controller is
-# designed on), ``controller`` (the config), ``seed``, ``rng``, ``quick``,
-# ``options`` and each scenario option by name. Its keyword parameters other
-# than those are the scenario's options (defaults checked by type); a
-# function taking ``**kwargs`` gets any option unchecked.
-# ``controllers.benchmark.check_controller(config)`` validates each config
-# before the sweep (a ValueError; its ``key`` attribute, if any, names the
-# offending key for the spec's line number).
+# A controller scenario runs one ``[[controllers]]`` config of the spec per
+# job. Its function is called with the keyword arguments it accepts of:
+# ``params`` (the job's randomized drive), ``nominal`` (the preset at the grid
+# point, no spreads: what a controller is designed on), ``controller`` (the
+# config), ``seed``, ``rng``, ``quick``, ``options`` and each scenario option
+# by name. Its keyword parameters other than those are the scenario's options
+# (defaults checked by type); a function taking ``**kwargs`` gets any option
+# unchecked.
 
 _PASSED = ("params", "nominal", "controller", "seed", "rng", "quick", "options")
-
-
-def _benchmark() -> Any | None:
-    try:
-        from controllers import benchmark
-    except ImportError:
-        return None
-    return benchmark
-
-
-def _benchmark_table() -> Mapping[str, Any] | None:
-    bm = _benchmark()
-    table = getattr(bm, "SCENARIOS", None) if bm is not None else None
-    return table if isinstance(table, Mapping) else None
-
-
-def _controller_scenarios() -> list[str]:
-    return sorted(_benchmark_table() or {})
 
 
 def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
@@ -358,7 +260,7 @@ def _call(fn: Callable[..., Any], kwargs: Mapping[str, Any]) -> Any:
 
 
 def _signature_options(fn: Callable[..., Any]) -> dict[str, Any] | None:
-    """Options of a benchmark function: its keyword parameters with defaults, not passed."""
+    """Options of a controller scenario: its keyword parameters with defaults, not passed."""
     sig = inspect.signature(fn)
     if any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
         return None
@@ -375,32 +277,33 @@ def _nominal(job: Any) -> JointParams:
     return p
 
 
-def _controller_scenario(name: str) -> Scenario:
-    bm = _benchmark()
-    table = _benchmark_table()
-    if table is None:
-        raise ValueError(f"unknown scenario 'controllers:{name}' (the controllers package is "
-                         f"not importable, or controllers.benchmark has no SCENARIOS table)")
-    if name not in table:
-        raise ValueError(f"unknown scenario 'controllers:{name}'")
-    bench_fn = table[name]
-    check = getattr(bm, "check_controller", None)
-    options = _signature_options(bench_fn)
+def register_controller_scenario(name: str, fn: Callable[..., Mapping[str, float]],
+                                 check_config: Callable[[dict[str, Any]], None] | None = None
+                                 ) -> Scenario:
+    """Register ``fn`` under ``name``, run once per ``[[controllers]]`` config.
+
+    ``fn`` takes the keyword arguments described above and returns metrics;
+    ``check_config(config)`` raises ValueError for a bad controller config
+    before the sweep starts (its ``key`` attribute, if any, names the
+    offending key for the spec's line number).
+    """
+    options = _signature_options(fn)
 
     def run(params: JointParams, job: Any) -> Mapping[str, float]:
         config = dict(job.controller or {})
         opts = {**(options or {}), **dict(job.options)}
-        metrics = _call(bench_fn, {"params": params, "nominal": _nominal(job),
-                                   "controller": config, "seed": job.run_seed(),
-                                   "rng": job.run_rng(), "quick": job.quick,
-                                   "options": dict(job.options), **opts})
+        metrics = _call(fn, {"params": params, "nominal": _nominal(job), "controller": config,
+                             "seed": job.run_seed(), "rng": job.run_rng(), "quick": job.quick,
+                             "options": dict(job.options), **opts})
         return {k: float(v) for k, v in dict(metrics).items()}
 
-    run.__doc__ = bench_fn.__doc__  # the summary quotes it
+    run.__doc__ = fn.__doc__  # the summary quotes it
 
     def check_slot(config: Mapping[str, Any]) -> None:
-        if callable(check):
-            check(dict(config))
+        if check_config is not None:
+            check_config(dict(config))
 
-    return Scenario(f"controllers:{name}", run, needs="controller", options=options,
-                    check_slot=check_slot, doc=(bench_fn.__doc__ or "").strip())
+    sc = Scenario(name, run, needs="controller", options=options, check_slot=check_slot,
+                  doc=(fn.__doc__ or "").strip())
+    _REGISTRY[name] = sc
+    return sc

@@ -9,7 +9,7 @@ A spec (every key but ``presets``, ``scenarios`` and ``seeds`` is optional)::
     scenarios = ["current_steps", "locked_random"] # see hdgym.sweep.scenarios.scenario_names()
     seeds = 4                           # 0..3, or a list [0, 7, 11]
     quick = false                       # shorter runs in every scenario
-    summary_dir = "results/sweeps"      # also write <name>.md / <name>.png here
+    summary_dir = "runs/sweeps"         # also write <name>.md / <name>.png here
 
     [spreads]                           # relative, one uniform draw per path per job
     "compliance.stiffness" = 0.3        # stiffness * (1 + 0.3 U(-1, 1))
@@ -46,163 +46,22 @@ and the line of the offending key.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
-import json
 import math
 import re
 import tomllib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, is_dataclass, replace
+from dataclasses import dataclass, field, is_dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from hdgym import params as P
+from hdgym.sweep.job import Job, as_param, scale_level
 
-__all__ = ["Job", "SweepSpec", "draw_params", "load_spec", "stable_hash"]
+__all__ = ["SweepSpec", "find_line", "load_spec", "parse_spec"]
 
 SWEEP_KEYS = {"name", "description", "presets", "scenarios", "seeds", "quick", "summary_dir"}
 TOP_KEYS = {"sweep", "spreads", "grid", "scenario", "controllers", "agents"}
-
-# A spread on a part (not a leaf) scales that part's *level* with one common
-# factor, keeping its internal constraints (breakaway >= coulomb, ripple <=
-# coulomb, cubic <= 0). Which fields make the level of each part:
-LEVEL_FIELDS: dict[type, tuple[str, ...]] = {
-    P.FrictionSide: ("coulomb", "breakaway", "viscous", "cubic", "ripple"),
-    P.Ripple: ("amplitude",),
-    P.Friction: ("input", "output"),
-    P.Hysteresis: ("element_stiffness", "element_strength", "width"),
-    P.KinematicError: ("harmonics",),
-    P.Harmonic: ("amplitude",),
-}
-
-
-def stable_hash(obj: Any, n: int = 16) -> str:
-    """Hex digest of the canonical JSON of ``obj`` (sorted keys, no spaces)."""
-    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()[:n]
-
-
-def _seed_words(digest: str) -> list[int]:
-    return [int(digest[i : i + 8], 16) for i in range(0, len(digest), 8)]
-
-
-@dataclass(frozen=True)
-class Job:
-    """One independent run: a drive, a scenario, a controller or agent, a seed.
-
-    Everything here is plain data (JSON-able), so a job travels to a process
-    pool or a Ray cluster as is; ``params_toml`` carries a drive read from a
-    file so remote workers need no access to it.
-    """
-
-    preset: str
-    scenario: str
-    seed: int
-    grid: Mapping[str, Any] = field(default_factory=dict)
-    spreads: Mapping[str, float] = field(default_factory=dict)
-    options: Mapping[str, Any] = field(default_factory=dict)
-    controller: Mapping[str, Any] | None = None
-    agent: Mapping[str, Any] | None = None
-    quick: bool = False
-    params_toml: str | None = None
-    #: where a job may keep files (trained policies); not an input, not hashed
-    workdir: str | None = field(default=None, compare=False)
-
-    def inputs(self) -> dict[str, Any]:
-        """What defines the job (hashed into :attr:`job_id`)."""
-        out = {"preset": self.preset, "scenario": self.scenario, "seed": self.seed,
-               "grid": dict(self.grid), "spreads": dict(self.spreads),
-               "options": dict(self.options), "controller": self.controller,
-               "agent": self.agent, "quick": self.quick}
-        if self.params_toml is not None:
-            out["params_sha256"] = hashlib.sha256(self.params_toml.encode()).hexdigest()
-        return out
-
-    @property
-    def job_id(self) -> str:
-        return stable_hash(self.inputs())
-
-    @property
-    def label(self) -> str:
-        """Controller or agent name ('' for open-loop scenarios)."""
-        src = self.controller or self.agent or {}
-        return str(src.get("name", ""))
-
-    def drive_rng(self) -> np.random.Generator:
-        """Generator of the randomized drive: seed + preset, grid point, spreads."""
-        digest = stable_hash({"preset": self.preset, "grid": dict(self.grid),
-                              "spreads": dict(self.spreads), "params": self.params_toml})
-        return np.random.default_rng([self.seed, *_seed_words(digest)])
-
-    def run_rng(self) -> np.random.Generator:
-        """Generator of the run (commands, noise): seed + drive + scenario + options."""
-        digest = stable_hash({"preset": self.preset, "grid": dict(self.grid),
-                              "spreads": dict(self.spreads), "params": self.params_toml,
-                              "scenario": self.scenario, "options": dict(self.options)})
-        return np.random.default_rng([self.seed, 1, *_seed_words(digest)])
-
-    def run_seed(self) -> int:
-        """An integer seed for APIs that take one (Simulator.run, env.reset)."""
-        return int(self.run_rng().integers(0, 2**31 - 1))
-
-    def base_params(self) -> P.JointParams:
-        if self.params_toml is not None:
-            return P.loads(self.params_toml, self.preset)
-        return P.preset(self.preset)
-
-
-def _scale_level(obj: Any, factor: float, path: str) -> Any:
-    """Scale the level fields of a part (see :data:`LEVEL_FIELDS`) by ``factor``."""
-    if isinstance(obj, tuple):
-        return tuple(_scale_level(v, factor, path) for v in obj)
-    if isinstance(obj, bool):
-        raise ValueError(f"parameter {path} is not numeric; it cannot be randomized")
-    if isinstance(obj, (int, float)):
-        return obj * factor
-    names = LEVEL_FIELDS.get(type(obj))
-    if names is None:
-        kinds = ", ".join(sorted(t.__name__ for t in LEVEL_FIELDS))
-        raise ValueError(f"parameter {path} is not numeric and has no level to scale; "
-                         f"parts with a level: {kinds}")
-    return replace(obj, **{n: _scale_level(getattr(obj, n), factor, f"{path}.{n}") for n in names})
-
-
-def draw_params(base: P.JointParams, grid: Mapping[str, Any], spreads: Mapping[str, float],
-                rng: np.random.Generator) -> tuple[P.JointParams, dict[str, Any]]:
-    """Apply a grid point, then one draw per spread path (in sorted path order).
-
-    A numeric leaf is scaled as :meth:`JointParams.perturb` does (each element
-    of a tuple its own draw); a part listed in :data:`LEVEL_FIELDS` is scaled
-    as a whole by one factor ``1 + spread * U(-1, 1)``.
-
-    Returns:
-        The drive and, per grid/spread path, what was drawn: the leaf's value
-        (a list for tuples) or, for a part, its common factor.
-    """
-    p = base
-    drawn: dict[str, Any] = {}
-    for path in sorted(grid):
-        p = p.set(path, _as_param(grid[path]))
-        drawn[path] = grid[path]
-    for path in sorted(spreads):
-        value = p.get(path)
-        if is_dataclass(value):
-            factor = 1.0 + spreads[path] * rng.uniform(-1.0, 1.0)
-            p = p.set(path, _scale_level(value, factor, path))
-            drawn[path] = factor
-        else:
-            p = p.perturb(rng, {path: spreads[path]})
-            v = p.get(path)
-            drawn[path] = list(v) if isinstance(v, tuple) else v
-    return p, drawn
-
-
-def _as_param(v: Any) -> Any:
-    return tuple(v) if isinstance(v, list) else v
-
 
 # ------------------------------------------------------------- line numbers
 
@@ -448,7 +307,7 @@ def parse_spec(text: str, path: str | Path = "spec.toml", *, quick: bool | None 
                 if isinstance(value, str | bool) or value is None:
                     raise ValueError(f"parameter {key} is not numeric; it cannot be randomized")
                 if is_dataclass(value):
-                    _scale_level(value, 1.0, key)
+                    scale_level(value, 1.0, key)
             except ValueError as exc:
                 raise w.error(f"spreads: {exc} (preset {pname})", "spreads", key) from None
     spreads = {k: float(v) for k, v in spreads.items()}
@@ -467,7 +326,7 @@ def parse_spec(text: str, path: str | Path = "spec.toml", *, quick: bool | None 
             try:
                 base.get(key)
                 for v in values:
-                    base.set(key, _as_param(v))
+                    base.set(key, as_param(v))
             except (ValueError, TypeError) as exc:
                 raise w.error(f"grid: {exc} (preset {pname})", "grid", key) from None
 

@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from hdgym.params import atomic_write_text
+from hdgym.files import atomic_write_text
 
 __all__ = ["ResultsStore", "format_value", "read_rows"]
 

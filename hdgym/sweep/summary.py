@@ -4,7 +4,7 @@ Per scenario, every metric is reduced to n / mean / std / min / max over the
 rows of each (preset, controller) group, i.e. over seeds, randomized drives
 and grid points together. Written to ``DIR/summary.md`` and
 ``DIR/summary.png``, and to ``<summary_dir>/<name>.md/.png`` when the spec
-sets ``summary_dir`` (the ready-made specs use ``results/sweeps``).
+sets ``summary_dir`` or ``hdgym sweep --summary-dir DIR`` asks for it.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from hdgym.params import atomic_write_text
+from hdgym.files import atomic_write_text
+from hdgym.page_changes import moved_section
 from hdgym.sweep.backends import FIXED_COLUMNS
 from hdgym.sweep.store import read_rows
 
@@ -156,6 +157,13 @@ def summarize(out_dir: str | Path, *, command: str | None = None,
         if len(errors) > 50:
             lines.append(f"\n… and {len(errors) - 50} more (see results.csv).")
         lines.append("")
+    # the page this run replaces: the committed copy if there is one, else the run's own
+    previous = Path(dest) / f"{name}.md" if dest is not None else out_dir / "summary.md"
+    if not previous.is_file():
+        previous = out_dir / "summary.md"
+    moved = moved_section(previous, "\n".join(lines))
+    if moved:
+        lines += [moved]
     lines += ["![summary](summary.png)" if dest is None else f"![summary]({name}.png)", ""]
 
     md = out_dir / "summary.md"

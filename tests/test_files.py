@@ -1,0 +1,60 @@
+"""Output files: usual permissions, nothing half-written, the results/ guard (issue 13: 2, 4)."""
+
+from __future__ import annotations
+
+import os
+import stat
+
+import pytest
+
+from hdgym.files import atomic_path, atomic_write_text, check_out, in_results, umask_mode
+
+
+@pytest.fixture
+def umask022():
+    old = os.umask(0o022)
+    yield
+    os.umask(old)
+
+
+def mode(p) -> int:
+    return stat.S_IMODE(os.stat(p).st_mode)
+
+
+def test_atomic_files_get_the_umask_mode(tmp_path, umask022):
+    atomic_write_text(tmp_path / "a" / "x.md", "hello\n")
+    assert (tmp_path / "a" / "x.md").read_text() == "hello\n"
+    assert mode(tmp_path / "a" / "x.md") == 0o644 and mode(tmp_path / "a") == 0o755
+    os.umask(0o077)
+    atomic_write_text(tmp_path / "y.md", "y")
+    assert mode(tmp_path / "y.md") == 0o600 == umask_mode()
+    assert umask_mode(directory=True) == 0o700
+
+
+def test_cli_outputs_get_the_umask_mode(tmp_path, umask022):
+    from hdgym.cli import main
+
+    rec, toml = tmp_path / "r" / "run.csv", tmp_path / "j.toml"
+    assert main(["simulate", "--preset", "tuttle-joint1", "--command", "step:1",
+                 "--duration", "0.05", "--out", str(rec)]) == 0
+    assert main(["params", "--preset", "tuttle-joint1", "--out", str(toml)]) == 0
+    assert mode(rec) == mode(toml) == 0o644 and mode(rec.parent) == 0o755
+
+
+def test_interrupted_write_leaves_nothing(tmp_path):
+    target = tmp_path / "page.md"
+    target.write_text("old")
+    with pytest.raises(KeyboardInterrupt), atomic_path(target) as tmp:
+        tmp.write_text("half")
+        raise KeyboardInterrupt
+    assert target.read_text() == "old" and sorted(os.listdir(tmp_path)) == ["page.md"]
+
+
+def test_results_guard(tmp_path):
+    (tmp_path / "pyproject.toml").write_text("")
+    assert in_results(tmp_path / "results" / "bench.md")
+    assert not in_results(tmp_path / "runs" / "results-quick" / "bench.md")
+    assert not in_results(tmp_path / "elsewhere" / "results" / "x")  # not a checkout's results/
+    check_out(tmp_path / "results" / "x.md", quick=False)
+    with pytest.raises(ValueError, match="quick runs never write into results/"):
+        check_out(tmp_path / "results" / "x.md", quick=True)

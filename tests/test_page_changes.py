@@ -1,0 +1,62 @@
+"""What moved between two versions of a results page (hdgym/page_changes.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hdgym.page_changes import moved_section, table_numbers
+
+BEFORE = """\
+# Bench
+
+Made by `x`.
+
+## Joint 1
+
+### Load step (20.9 N m)
+
+| controller | peak (arcsec) | speed | target |
+|---|---|---|---|
+| PID | 177.6 | 1,200 rev/s | ≥ 50 %: met |
+| PID | 10 | 3 | |
+| PID + DOB | 81.4 | inf | ≥ 50 %: met |
+
+## Joint 3
+
+| controller | peak (arcsec) |
+|---:|---:|
+| PID | 5.0 |
+"""
+
+
+def test_table_numbers_keys_rows_by_place_label_and_rank() -> None:
+    nums = table_numbers(BEFORE)
+    place = "Joint # / Load step (# N m)"  # numbers in headings are blanked
+    assert nums[(place, "PID", "peak (arcsec)")] == 177.6
+    assert nums[(place, "PID", "speed")] == 1200.0
+    assert nums[(place, "PID #2", "speed")] == 3.0
+    assert nums[(place, "PID + DOB", "speed")] == float("inf")
+    assert nums[("Joint #", "PID", "peak (arcsec)")] == 5.0
+    table = "| x | y |\n|---|---|\n| r | {} |\n"
+    twice = table_numbers("## A\n\n" + table.format(1) + "\n" + table.format(2))
+    assert twice == {("A", "r", "y"): 1.0, ("A (2)", "r", "y"): 2.0}
+    assert (place, "PID", "target") not in nums  # "≥ 50 %" does not start with a number
+    assert len(nums) == 7
+
+
+def test_moved_section_names_each_change_and_survives_its_own_rerun(tmp_path: Path) -> None:
+    after = (BEFORE.replace("(20.9 N m)", "(21.4 N m)").replace("| 177.6 |", "| 150.0 |")
+             .replace("≥ 50 %: met |\n| PID | 10", "≥ 50 %: **not met** |\n| PID | 10")
+             .replace("| PID | 5.0 |\n", ""))
+    sec = moved_section(BEFORE, after)
+    assert sec.startswith("## What moved since the previous run\n")
+    assert "1 of 6 table numbers in both pages changed; 1 numbers are no longer on the page" in sec
+    assert "| Joint # / Load step (# N m) | PID | peak (arcsec) | 177.6 | 150 | -15.5 % |" in sec
+    page = tmp_path / "page.md"
+    page.write_text(after + "\n" + sec)
+    # the next run reads that page: its own "what moved" table is not part of the comparison
+    again = moved_section(page, after)
+    assert "0 of 6 table numbers in both pages changed." in again
+    assert "| where |" not in again
+    assert moved_section(tmp_path / "missing.md", after) == ""
+    assert moved_section(None, after) == ""
