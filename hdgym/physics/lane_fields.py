@@ -150,6 +150,7 @@ def prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) ->
     locked = (flags & LOCKED) != 0
     put(w, LOCK, j, 1.0 if locked else 0.0)
     put(w, H_O, j, 0.0 if locked else dt / p[L.J_O])
+    # eqs. (9), (10): the current loop factor and the amplifier limits
     put(w, ALPHA, j, 1.0 - math.exp(-2.0 * math.pi * p[L.BW] * dt))
     if flags & AMP:
         inv_res = 1.0 / p[L.RES]

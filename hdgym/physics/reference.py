@@ -1,4 +1,5 @@
-"""Plain-numpy reference of the joint step, vectorized over the batch.
+"""Plain-numpy reference of the joint step, vectorized over the batch: docs/physics.md
+eqs. (1)-(13).
 
 Slow, readable and independent of numba: tests check that the compiled
 :mod:`hdgym.physics.kernel` agrees with it. Same algorithm (see the kernel's
@@ -21,7 +22,7 @@ def _on(flags: np.ndarray, name: str) -> np.ndarray:
 
 
 def spring(x: np.ndarray, p: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Spring torque for a batch of torsions ``x`` (output rad), N m."""
+    """Spring torque for a batch of torsions ``x`` (output rad), N m: eq. (3)."""
     k1 = p[:, L.K1]
     lin = k1 * x
     ax = np.abs(x)
@@ -62,6 +63,7 @@ def spring_energy(x: np.ndarray, p: np.ndarray, flags: np.ndarray) -> np.ndarray
 
 
 def _ke(th_m: np.ndarray, p: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kinematic error and its slope: eq. (1)."""
     ke = np.zeros_like(th_m)
     dke = np.zeros_like(th_m)
     on = _on(flags, "kinematic_error")
@@ -76,6 +78,7 @@ def _ke(th_m: np.ndarray, p: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray,
 
 def _level(p: np.ndarray, base: int, w: np.ndarray, th_in: np.ndarray, th_out: np.ndarray,
            extra: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Coulomb-type friction level of one side: eq. (7)."""
     fc = p[:, base + L.F_FC]
     fs = p[:, base + L.F_FS]
     r = w / p[:, base + L.F_WS]
@@ -91,6 +94,7 @@ def _level(p: np.ndarray, base: int, w: np.ndarray, th_in: np.ndarray, th_out: n
 
 
 def _visc(p: np.ndarray, base: int, w: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Secant viscous coefficient of one side: eq. (7)."""
     b1 = p[:, base + L.F_B1]
     b2 = p[:, base + L.F_B2]
     w2 = w * w
@@ -104,6 +108,7 @@ def _visc(p: np.ndarray, base: int, w: np.ndarray, flags: np.ndarray) -> np.ndar
 
 def _advance(w: np.ndarray, tau: np.ndarray, inertia: np.ndarray, visc: np.ndarray,
              level: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """New speeds and dissipated power: eq. (11)."""
     denom = 1.0 + dt * visc / inertia
     v_free = (w + dt * tau / inertia) / denom
     dv = dt * level / inertia / denom
@@ -121,6 +126,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     r = p[:, L.RATIO]
     th_m, w_m, th_o, w_o = x[:, L.TH_M], x[:, L.W_M], x[:, L.TH_O], x[:, L.W_O]
     ke, dke = _ke(th_m, p, flags)
+    # eq. (2)
     dth = th_m / r - th_o - ke
     gear = 1.0 / r - dke
     ddth = w_m * gear - w_o
@@ -128,7 +134,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.DTH] = dth
     hyst = _on(flags, "hysteresis")
     tanh_model = hyst & (p[:, L.HMODEL] == 1.0)
-    # Maxwell-slip
+    # Maxwell-slip: eq. (4)
     t_h = np.zeros(len(x))
     diss = np.zeros(len(x))
     for k in range(MAX_SLIP_ELEMENTS):
@@ -142,7 +148,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
         x[:, L.HZ + k] = np.where(use, fc, x[:, L.HZ + k])
         t_h += np.where(use, fc, 0.0)
         diss += np.where(use, slip, 0.0)
-    # tanh element with last-reversal memory
+    # tanh element with last-reversal memory: eq. (5)
     s = x[:, L.HZ + 2]
     s_new = np.where(d_inc > REVERSAL_DEADBAND, 1.0, np.where(d_inc < -REVERSAL_DEADBAND, -1.0, s))
     rev = tanh_model & (s_new != s)
@@ -154,9 +160,10 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     th_tanh = dts + (s * p[:, L.TANH_B] - dts) * np.tanh(p[:, L.TANH_G] * s * (dth - x[:, L.HZ]))
     x[:, L.HZ + 3] = np.where(tanh_model, th_tanh, x[:, L.HZ + 3])
     t_h = np.where(tanh_model, th_tanh, t_h)
+    # eqs. (3), (6)
     t_k = spring(dth, p, flags) + p[:, L.CDAMP] * ddth + t_h
     x[:, L.TK] = t_k
-    # amplifier
+    # amplifier: eq. (9); current loop: eq. (10)
     amp = _on(flags, "amplifier_saturation")
     hi = (p[:, L.V_MAX] - p[:, L.KB] * w_m) / p[:, L.RES]
     lo = (-p[:, L.V_MAX] - p[:, L.KB] * w_m) / p[:, L.RES]
@@ -188,8 +195,10 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.T_LOAD] = t_load
     x[:, L.W_M] = w_m_new
     x[:, L.W_O] = w_o_new
+    # eq. (12)
     x[:, L.TH_M] = th_m + dt * w_m_new
     x[:, L.TH_O] = th_o + dt * w_o_new
+    # eq. (13)
     x[:, L.E_DISS] += dt * (pm + po + p[:, L.CDAMP] * ddth**2) + diss
     x[:, L.W_MOTOR] += dt * t_m * w_m_new
     x[:, L.W_LOAD] -= dt * t_load * w_o_new

@@ -226,17 +226,27 @@ def plateau_near(currents: np.ndarray, speeds: np.ndarray, target: float, tol: f
     return best
 
 
-def resonant_step(speeds: np.ndarray, fluctuation: np.ndarray, target: float, tol: float = 0.15,
-                  factor: float = 3.0) -> int | None:
-    """A step whose mean speed lies within ``tol`` of ``target`` and whose torque
-    fluctuation is at least ``factor`` times the median of all steps (a resonant area,
-    Tuttle §2.6: "torque fluctuations can become extremely large at velocities which
-    excite system resonance"); the one with the largest fluctuation, or None."""
+def resonant_step(speeds: np.ndarray, fluctuation: np.ndarray, target: float,
+                  targets: tuple[float, ...], tol: float = 0.15, factor: float = 3.0
+                  ) -> tuple[int | None, float]:
+    """A resonant area near ``target`` (Tuttle §2.6: "torque fluctuations can become
+    extremely large at velocities which excite system resonance").
+
+    The baseline is the median ``fluctuation`` of the steps whose mean speed lies
+    outside every window ``target' (1 +- tol)`` of ``targets``; a step in ``target``'s
+    window whose fluctuation is at least ``factor`` times the baseline marks the area.
+
+    Returns:
+        ``(index of the step with the largest fluctuation in the window, or None if none
+        reaches the threshold; the baseline)``.
+    """
     sp = np.asarray(speeds, dtype=float)
     fl = np.asarray(fluctuation, dtype=float)
-    med = float(np.median(fl))
-    idx = [k for k in range(sp.size) if abs(sp[k] / target - 1) <= tol and fl[k] >= factor * med]
-    return max(idx, key=lambda k: fl[k]) if idx else None
+    near = [any(abs(v / t - 1) <= tol for t in targets) for v in sp]
+    outside = fl[~np.array(near)]
+    base = float(np.median(outside)) if outside.size else float(np.median(fl))
+    idx = [k for k in range(sp.size) if abs(sp[k] / target - 1) <= tol and fl[k] >= factor * base]
+    return (max(idx, key=lambda k: fl[k]) if idx else None), base
 
 
 @dataclass(frozen=True)
