@@ -4,6 +4,8 @@
 - :func:`step_table` / :func:`starting_current`: batched current steps from rest (Tuttle §2.6);
 - :func:`plateau_jump` / :func:`grows_smoothly`: a velocity plateau and its breakout;
 - :func:`frequency_response` / :func:`resonance_peak`: H1 estimate and its peak;
+- :func:`plateau_near` / :func:`run_up`: a plateau near a speed, and the torque
+  fluctuation against speed pooled over the steps (resonant areas);
 - :func:`loop_metrics`: hardening and hysteresis of a torque / wind-up loop.
 
 Everything is deterministic.
@@ -129,7 +131,6 @@ class StepRuns:
     Attributes:
         currents: step currents, A.
         speed: mean WG speed, rad/s.
-        ripple: WG-speed ripple, (max - min) / mean over the window.
         torque_mean: mean flexspline torque (the torque sensor's reading), N m.
         torque_peak: largest |flexspline torque| in the window, N m.
         torque_std: standard deviation of the flexspline torque in the window, N m.
@@ -140,7 +141,6 @@ class StepRuns:
 
     currents: np.ndarray
     speed: np.ndarray
-    ripple: np.ndarray
     torque_mean: np.ndarray
     torque_peak: np.ndarray
     torque_std: np.ndarray
@@ -191,8 +191,7 @@ def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[f
         tk[k] = xs[:, L.TK]
     ww, tw = w[start:], tk[start:]
     speed = ww.mean(axis=0)
-    ripple = (ww.max(axis=0) - ww.min(axis=0)) / np.maximum(np.abs(speed), 1e-300)
-    return StepRuns(currents=currents, speed=speed, ripple=ripple, torque_mean=tw.mean(axis=0),
+    return StepRuns(currents=currents, speed=speed, torque_mean=tw.mean(axis=0),
                     torque_peak=np.abs(tw).max(axis=0), torque_std=tw.std(axis=0), wg_speed=w,
                     torque=tk, ctrl_dt=dt)
 
@@ -226,27 +225,66 @@ def plateau_near(currents: np.ndarray, speeds: np.ndarray, target: float, tol: f
     return best
 
 
-def resonant_step(speeds: np.ndarray, fluctuation: np.ndarray, target: float,
-                  targets: tuple[float, ...], tol: float = 0.15, factor: float = 3.0
-                  ) -> tuple[int | None, float]:
-    """A resonant area near ``target`` (Tuttle §2.6: "torque fluctuations can become
-    extremely large at velocities which excite system resonance").
+@dataclass(frozen=True)
+class RunUp:
+    """Torque fluctuation against WG speed, pooled over current steps (an order run-up).
 
-    The baseline is the median ``fluctuation`` of the steps whose mean speed lies
-    outside every window ``target' (1 +- tol)`` of ``targets``; a step in ``target``'s
-    window whose fluctuation is at least ``factor`` times the baseline marks the area.
-
-    Returns:
-        ``(index of the step with the largest fluctuation in the window, or None if none
-        reaches the threshold; the baseline)``.
+    Attributes:
+        speed: centre of each speed bin, °/s (bins with too few windows dropped).
+        level: median over the bin's windows of the flexspline torque's standard
+            deviation about its linear trend, N m.
     """
-    sp = np.asarray(speeds, dtype=float)
-    fl = np.asarray(fluctuation, dtype=float)
-    near = [any(abs(v / t - 1) <= tol for t in targets) for v in sp]
-    outside = fl[~np.array(near)]
-    base = float(np.median(outside)) if outside.size else float(np.median(fl))
-    idx = [k for k in range(sp.size) if abs(sp[k] / target - 1) <= tol and fl[k] >= factor * base]
-    return (max(idx, key=lambda k: fl[k]) if idx else None), base
+
+    speed: np.ndarray
+    level: np.ndarray
+
+    def prominence(self, target: float, tol: float = 0.15) -> tuple[float, float]:
+        """``(height, speed)`` of the largest level within ``target (1 +- tol)`` over the
+        higher of the two flanking minima (``target/2 .. target(1 - tol)`` and
+        ``target(1 + tol) .. 2 target``), and the speed of that level; NaN when a
+        flank or the window has no data."""
+        sp, lv = self.speed, self.level
+        win = (sp >= (1 - tol) * target) & (sp <= (1 + tol) * target)
+        left = (sp >= 0.5 * target) & (sp < (1 - tol) * target)
+        right = (sp > (1 + tol) * target) & (sp <= 2.0 * target)
+        if not (win.any() and left.any() and right.any()):
+            return math.nan, math.nan
+        k = np.flatnonzero(win)[np.argmax(lv[win])]
+        return float(lv[k] / max(lv[left].min(), lv[right].min())), float(sp[k])
+
+
+def run_up(runs: StepRuns, window: float = 0.05, skip: float = 0.2, lo: float = 1000.0,
+           hi: float = 60000.0, n_bins: int = 60, min_count: int = 3) -> RunUp:
+    """Pool every step's record into a run-up curve (Tuttle §2.6: the joints pass through
+    their resonant regions on the way up, and torque fluctuations grow there).
+
+    Each step's record after ``skip`` s is cut into windows of ``window`` s; a window
+    gives its mean WG speed and the standard deviation of the flexspline torque about
+    the window's linear trend (so acceleration does not count). Windows are binned by
+    speed (``n_bins`` geometric bins, ``lo``-``hi`` °/s) and each bin with at least
+    ``min_count`` windows reports their median.
+    """
+    m = max(int(round(window / runs.ctrl_dt)), 3)
+    k0 = int(round(skip / runs.ctrl_dt))
+    w = np.degrees(runs.wg_speed[k0:])
+    t = runs.torque[k0:]
+    n_win = w.shape[0] // m
+    w = w[:n_win * m].reshape(n_win, m, -1)
+    t = t[:n_win * m].reshape(n_win, m, -1)
+    x = np.arange(m) - (m - 1) / 2.0
+    slope = np.einsum("kmc,m->kc", t, x) / float(x @ x)
+    resid = t - t.mean(axis=1, keepdims=True) - slope[:, None, :] * x[None, :, None]
+    speed = w.mean(axis=1).ravel()
+    fluct = resid.std(axis=1).ravel()
+    edges = np.geomspace(lo, hi, n_bins + 1)
+    idx = np.digitize(speed, edges) - 1
+    centres, levels = [], []
+    for b in range(n_bins):
+        sel = idx == b
+        if sel.sum() >= min_count:
+            centres.append(math.sqrt(edges[b] * edges[b + 1]))
+            levels.append(float(np.median(fluct[sel])))
+    return RunUp(np.array(centres), np.array(levels))
 
 
 @dataclass(frozen=True)
