@@ -10,7 +10,8 @@ A config is a TOML file (see ``agents/configs/``) with the tables
   ``target_speed`` in rad/s, ``[env.kwargs.randomize]`` relative spreads
   per dotted parameter path);
 * ``[train]``: ``algo`` (``ppo`` or ``sac``), ``total_timesteps``,
-  ``n_envs``, ``vec_env`` (``dummy`` or ``subproc``), ``seed``,
+  ``n_envs``, ``vec_env`` (``native``: one batch of the compiled env,
+  the default; ``dummy`` or ``subproc``: a Python env per joint), ``seed``,
   ``eval_freq``, ``eval_episodes``, ``checkpoint_freq`` (env steps);
 * ``[policy]``: ``net_arch`` (hidden layer sizes), ``log_std_init``;
 * ``[algo]``: keyword arguments of the SB3 algorithm.
@@ -68,7 +69,7 @@ def load_config(name: str | Path) -> dict[str, Any]:
     t.setdefault("algo", "ppo")
     t.setdefault("total_timesteps", 100_000)
     t.setdefault("n_envs", 4)
-    t.setdefault("vec_env", "dummy")
+    t.setdefault("vec_env", "native")
     t.setdefault("seed", 0)
     t.setdefault("eval_freq", 0)
     t.setdefault("eval_episodes", 8)
@@ -151,10 +152,39 @@ def make_env(cfg: Mapping[str, Any], monitor_file: str | None = None,
     return Monitor(env, filename=monitor_file)
 
 
+def make_native_vec_env(cfg: Mapping[str, Any], n_envs: int,
+                        extra_kwargs: Mapping[str, Any] | None = None) -> Any:
+    """The config's envs as one :class:`~agents.vec_env.HarmonicDriveVecEnv` batch,
+    action repeat and torque penalty inside the batch."""
+    from agents.vec_env import HarmonicDriveVecEnv
+
+    e = cfg["env"]
+    kw = env_kwargs(cfg)
+    kw.update(extra_kwargs or {})
+    tp = e.get("torque_penalty")
+    penalty = (float(tp.get("weight", 0.0)), float(tp.get("threshold", 1.0))) if tp else None
+    return HarmonicDriveVecEnv(e["id"], n_envs, action_repeat=int(e["action_repeat"]),
+                               torque_penalty=penalty,
+                               max_episode_steps=int(e["max_episode_steps"]), **kw)
+
+
 def make_vec_env(cfg: Mapping[str, Any], n_envs: int, seed: int,
-                 monitor_dir: str | Path | None = None, kind: str = "dummy") -> Any:
-    """An SB3 VecEnv of ``n_envs`` configured envs, env ``i`` seeded ``seed + i``."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+                 monitor_dir: str | Path | None = None, kind: str = "native") -> Any:
+    """An SB3 VecEnv of ``n_envs`` configured envs, env ``i`` seeded ``seed + i``.
+
+    ``kind``: ``native`` (one batch of the compiled env, SB3's ``VecMonitor``
+    writes ``monitor_dir/native.monitor.csv``), ``dummy`` or ``subproc``
+    (one wrapped Python env per joint, :func:`make_env`).
+    """
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
+
+    if kind == "native":
+        venv = make_native_vec_env(cfg, n_envs)
+        f = None if monitor_dir is None else str(Path(monitor_dir) / "native")
+        venv = VecMonitor(venv, filename=f, info_keywords=("is_success",)
+                          if "success" in venv.get_attr("task")[0].aux_names else ())
+        venv.seed(seed)
+        return venv
 
     def thunk(i: int) -> Callable[[], gym.Env]:
         def _make() -> gym.Env:
@@ -168,7 +198,7 @@ def make_vec_env(cfg: Mapping[str, Any], n_envs: int, seed: int,
     elif kind == "dummy":
         venv = DummyVecEnv(fns)
     else:
-        raise ValueError(f"vec_env must be 'dummy' or 'subproc', got {kind!r}")
+        raise ValueError(f"vec_env must be 'native', 'dummy' or 'subproc', got {kind!r}")
     venv.seed(seed)
     return venv
 

@@ -6,15 +6,18 @@
 All controllers run on the same episodes: one batch of ``--episodes`` envs
 of the native vector env, env ``i`` seeded ``seed + i``, so every controller
 sees the same randomized drives, WG start angles and target speeds. The env
-is the one stored in the policy zip (or ``--config``), with its action
-repeat.
+is the one stored in the policy zip (or ``--config``). The policy acts with
+the config's action repeat; every classical controller acts every control
+period (its ``dt`` is the env's ``ctrl_dt``).
 
-Per episode, from the *true* states in ``info``:
+Per episode, from the env's ``info`` (true states):
 
-* reached: the motor speed, averaged over the last 50 ms, comes within 5 %
-  of the target at some time (``time to target`` is the first such time);
-* trapped: that averaged speed never exceeds 9,000 deg/s (the 2x-order
-  trap sits near 8,000 deg/s);
+* success: the task's (the target reached by the deadline, |flexspline
+  torque| never above the rating; an episode over the rating ends there);
+* reached: the motor speed, filtered with 25 ms, comes within 5 % of the
+  target at some time (``time to target`` is the first such time);
+* trapped: the speed averaged over 50 ms never exceeds 9,000 deg/s (the
+  2x-order trap sits near 8,000 deg/s);
 * peak torque: the largest |flexspline torque| in the episode.
 
 Controllers: ``policy`` (the SB3 model, deterministic), ``pi`` (PI speed
@@ -28,8 +31,8 @@ saturates there). "The amplifier" is the env's: for
 config sets ``current_limit`` (3.7 A: the trap-only variant).
 ``ripple@a,phi`` and ``damp@a,phi`` are full current shaped against the
 vibration (:class:`~agents.baselines.RippleCurrent`,
-:class:`~agents.baselines.DampingCurrent`; they are meant to run with an
-action repeat of 1).
+:class:`~agents.baselines.DampingCurrent`, acting every control period
+like all classical controllers here).
 """
 
 from __future__ import annotations
@@ -47,9 +50,9 @@ import numpy as np
 
 from agents.baselines import ConstantCurrent, DampingCurrent, PISpeedController, RippleCurrent
 from agents.common import env_kwargs, load_config, load_policy, policy_config
+from agents.front import wilson
 
 SMOOTH_S = 0.05
-REACH_TOL = 0.05
 TRAP_SPEED = math.radians(9000.0)
 
 
@@ -57,9 +60,11 @@ TRAP_SPEED = math.radians(9000.0)
 class EpisodeStats:
     controller: str
     episodes: int
+    success: float  # fraction: the task's success (deadline and rating)
+    success_ci: tuple[float, float]  # 95 % Wilson interval
     reached: float  # fraction
     trapped: float  # fraction
-    time_to_target_s: float  # mean over reached episodes (nan if none)
+    time_to_target_s: float  # s, mean over reached episodes (nan if none)
     peak_torque_mean: float  # N m, mean over episodes of the episode peak
     peak_torque_max: float  # N m
     max_speed_deg_s: float  # mean over episodes of the highest averaged speed
@@ -74,11 +79,18 @@ def make_batch_env(cfg: dict[str, Any], n: int, seed: int) -> Any:
     return venv
 
 
+def controller_period(name: str, cfg: dict[str, Any]) -> int:
+    """Control periods between a controller's decisions: the policy's action repeat, 1 for
+    every classical controller (their dt is the env's control period)."""
+    return int(cfg["env"]["action_repeat"]) if name.startswith("policy") else 1
+
+
 def controller_for(name: str, venv: Any, model: Any = None) -> Any:
-    """A controller object with ``predict`` from a controller name."""
+    """A controller object with ``predict`` from a controller name (classical controllers
+    are built for a call every control period, see :func:`controller_period`)."""
     u = venv.unwrapped if hasattr(venv, "unwrapped") else venv
     b = u.batch
-    if name == "policy":
+    if name.startswith("policy"):
         if model is None:
             raise ValueError("controller 'policy' needs --policy")
         return model
@@ -107,18 +119,19 @@ def controller_for(name: str, venv: Any, model: Any = None) -> Any:
                      "const@<x>, const@<A>A, ripple@<a>,<deg> or damp@<a>,<deg>")
 
 
-def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
+def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int, repeat: int = 1
                  ) -> dict[str, np.ndarray]:
-    """One episode in each of ``n`` batched envs; returns per-period traces ``(n, T)``.
+    """One episode in each of ``n`` batched envs, the controller acting every ``repeat``
+    periods; returns per-period traces ``(n, T)`` and per-episode results.
 
     Keys: ``time``, ``speed`` (true motor speed, rad/s), ``torque`` (true
     flexspline torque, N m), ``current`` (true motor current, A),
-    ``target`` (rad/s, per episode), ``length`` (periods, per episode),
-    ``terminated`` (bool, per episode).
+    ``target`` (rad/s), ``length`` (periods), ``terminated`` (bool), and the
+    env's ``time_to_target`` (s, NaN if never), ``peak_torque`` (N m) and
+    ``success`` (bool), per episode.
     """
     venv = make_batch_env(cfg, n, seed)
     u = venv.unwrapped if hasattr(venv, "unwrapped") else venv
-    repeat = int(cfg["env"]["action_repeat"])
     steps = int(cfg["env"]["max_episode_steps"])
     obs, info = venv.reset(seed=seed)
     if hasattr(controller, "reset"):
@@ -129,6 +142,9 @@ def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
     target = np.asarray(info["target_speed"], dtype=float).copy()
     length = np.full(n, steps)
     terminated = np.zeros(n, dtype=bool)
+    ttt = np.full(n, np.nan)
+    peak = np.zeros(n)
+    ok = np.zeros(n, dtype=bool)
     alive = np.ones(n, dtype=bool)
     first = np.ones(n, dtype=bool)
     action = np.zeros((n, 1), dtype=np.float32)
@@ -144,13 +160,18 @@ def run_episodes(cfg: dict[str, Any], controller: Any, n: int, seed: int
         ended = alive & (term | trunc)
         length[ended] = k + 1
         terminated |= ended & term
+        ttt[ended] = np.where(info["time_to_target"][ended] >= 0,
+                                      info["time_to_target"][ended], np.nan)
+        peak[ended] = info["peak_torque"][ended]
+        ok[ended] = info["success"][ended] > 0.5
         alive &= ~ended
         if not alive.any():
             break
     venv.close()
     time = np.arange(1, steps + 1) * u.batch.ctrl_dt
     return {"time": time, "speed": speed, "torque": torque, "current": current,
-            "target": target, "length": length, "terminated": terminated}
+            "target": target, "length": length, "terminated": terminated,
+            "time_to_target": ttt, "peak_torque": peak, "success": ok}
 
 
 def smoothed(speed: np.ndarray, dt: float) -> np.ndarray:
@@ -164,25 +185,25 @@ def smoothed(speed: np.ndarray, dt: float) -> np.ndarray:
 
 
 def episode_metrics(tr: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Per-episode reached / time to target / trapped / peak torque / max speed."""
+    """Per-episode success / reached / time to target / trapped / peak torque / max speed."""
     dt = float(tr["time"][1] - tr["time"][0])
     ws = smoothed(tr["speed"], dt)
     n, steps = ws.shape
     valid = np.arange(steps)[None, :] < tr["length"][:, None]
-    near = (np.abs(ws - tr["target"][:, None]) <= REACH_TOL * tr["target"][:, None]) & valid
-    reached = near.any(axis=1)
-    t_reach = np.where(reached, tr["time"][np.argmax(near, axis=1)], np.nan)
     wmax = np.where(valid, ws, -np.inf).max(axis=1)
-    peak = np.where(valid, np.abs(tr["torque"]), 0.0).max(axis=1)
-    return {"reached": reached, "time_to_target": t_reach, "trapped": wmax < TRAP_SPEED,
-            "peak_torque": peak, "max_speed": wmax, "terminated": tr["terminated"]}
+    reached = np.isfinite(tr["time_to_target"])
+    return {"success": tr["success"], "reached": reached,
+            "time_to_target": tr["time_to_target"], "trapped": wmax < TRAP_SPEED,
+            "peak_torque": tr["peak_torque"], "max_speed": wmax,
+            "terminated": tr["terminated"]}
 
 
 def summarize(name: str, m: dict[str, np.ndarray]) -> EpisodeStats:
     n = m["reached"].size
     tt = m["time_to_target"][m["reached"]]
     return EpisodeStats(
-        controller=name, episodes=n, reached=float(m["reached"].mean()),
+        controller=name, episodes=n, success=float(m["success"].mean()),
+        success_ci=wilson(float(m["success"].sum()), n), reached=float(m["reached"].mean()),
         trapped=float(m["trapped"].mean()),
         time_to_target_s=float(tt.mean()) if tt.size else float("nan"),
         peak_torque_mean=float(m["peak_torque"].mean()),
@@ -199,7 +220,7 @@ def evaluate(cfg: dict[str, Any], controllers: list[str], n: int, seed: int,
         probe = make_batch_env(cfg, 1, seed)
         ctl = controller_for(name, probe, model)
         probe.close()
-        tr = run_episodes(cfg, ctl, n, seed)
+        tr = run_episodes(cfg, ctl, n, seed, controller_period(name, cfg))
         traces[name] = tr
         stats.append(summarize(name, episode_metrics(tr)))
     return stats, traces
@@ -230,14 +251,16 @@ def label(name: str) -> str:
 
 
 def markdown_table(stats: list[EpisodeStats], policy_label: str | None = None) -> str:
-    rows = ["| controller | episodes | reached target | trapped < 9,000 deg/s | mean time to "
-            "target (s) | peak flexspline torque, mean / max (N m) | highest speed, mean "
-            "(deg/s) | safety stops |",
-            "|---|---|---|---|---|---|---|---|"]
+    rows = ["| controller | episodes | success (95 % CI) | reached target | trapped < 9,000 "
+            "deg/s | mean time to target (s) | peak flexspline torque, mean / max (N m) | "
+            "highest speed, mean (deg/s) | safety stops |",
+            "|---|---|---|---|---|---|---|---|---|"]
     for s in stats:
         tt = "-" if math.isnan(s.time_to_target_s) else f"{s.time_to_target_s:.2f}"
         name = policy_label if s.controller == "policy" and policy_label else label(s.controller)
-        rows.append(f"| {name} | {s.episodes} | {100 * s.reached:.0f} % | "
+        lo, hi = s.success_ci
+        rows.append(f"| {name} | {s.episodes} | {100 * s.success:.0f} % ({100 * lo:.0f}-"
+                    f"{100 * hi:.0f}) | {100 * s.reached:.0f} % | "
                     f"{100 * s.trapped:.0f} % | {tt} | {s.peak_torque_mean:.0f} / "
                     f"{s.peak_torque_max:.0f} | {s.max_speed_deg_s:,.0f} | "
                     f"{100 * s.terminated:.0f} % |")

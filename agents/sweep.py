@@ -44,7 +44,8 @@ def _check_agent(config: Mapping[str, Any]) -> None:
 
 @register("rl_train", needs="agent", options={}, check_slot=_check_agent)
 def rl_train(params: JointParams, job: Any) -> dict[str, float]:
-    """Train an SB3 policy on the job's drive and evaluate it: ``reached``, ``trapped``,
+    """Train an SB3 policy on the job's drive and evaluate it: ``success`` (the task's:
+    the target by the deadline within the rating), ``reached``, ``trapped``,
     ``terminated`` (fractions of episodes), ``time_to_target_s`` (s), ``peak_torque_mean``,
     ``peak_torque_max`` (N m, flexspline), ``max_speed_deg_s`` (deg/s), ``agent_steps``.
 
@@ -85,11 +86,12 @@ def rl_train(params: JointParams, job: Any) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(job.workdir) / job.job_id if job.workdir else Path(tmp)
         summary = train(cfg, out, progress=False)
-        model = load_policy(Path(summary["final_policy"]))
+        model = load_policy(out / "final.zip")  # train.json names it relative to the cwd
         stats, _ = evaluate(cfg, ["policy"], n_eval, 1_000_000 + job.run_seed() % 1_000_000,
                             model)
     s = stats[0]
-    return {"reached": s.reached, "trapped": s.trapped, "terminated": s.terminated,
+    return {"success": s.success, "reached": s.reached, "trapped": s.trapped,
+            "terminated": s.terminated,
             "time_to_target_s": s.time_to_target_s, "peak_torque_mean": s.peak_torque_mean,
             "peak_torque_max": s.peak_torque_max, "max_speed_deg_s": s.max_speed_deg_s,
             "agent_steps": float(summary["agent_steps"])}

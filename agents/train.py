@@ -23,6 +23,15 @@ from typing import Any
 from agents.common import DEFAULT_CONFIGS, embed_config, load_config, make_vec_env
 
 
+def shown(path: str | Path) -> str:
+    """``path`` as reports name it: relative to the working folder or to the checkout."""
+    p = Path(path).resolve()
+    for base in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        if p.is_relative_to(base):
+            return p.relative_to(base).as_posix()
+    return p.name
+
+
 def build_model(cfg: dict[str, Any], venv: Any, seed: int, tb_dir: str | None) -> Any:
     """The SB3 model of a config on ``venv``."""
     from stable_baselines3 import PPO, SAC
@@ -61,7 +70,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     eval_env = None
     if int(t["eval_freq"]) > 0:
         n_eval = int(t["eval_episodes"])
-        eval_env = make_vec_env(cfg, n_eval, seed + 10_000, None, "dummy")
+        eval_env = make_vec_env(cfg, n_eval, seed + 10_000, None, t["vec_env"])
         callbacks.append(EvalCallback(eval_env, n_eval_episodes=n_eval,
                                       eval_freq=max(int(t["eval_freq"]) // n_envs, 1),
                                       log_path=str(out / "eval"),
@@ -81,10 +90,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
         eval_env.close()
     steps = int(model.num_timesteps)
     periods = steps * int(cfg["env"]["action_repeat"])
-    summary = {"config": cfg["source"], "algo": t["algo"], "seed": seed, "n_envs": n_envs,
+    summary = {"config": shown(cfg["source"]), "algo": t["algo"], "seed": seed, "n_envs": n_envs,
                "agent_steps": steps, "control_periods": periods, "wall_time_s": round(wall, 1),
                "agent_steps_per_s": round(steps / wall, 1),
-               "control_periods_per_s": round(periods / wall, 1), "final_policy": str(final)}
+               "control_periods_per_s": round(periods / wall, 1), "final_policy": shown(final)}
     (out / "train.json").write_text(json.dumps(summary, indent=1) + "\n")
     return summary
 
@@ -99,8 +108,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int)
     ap.add_argument("--total-timesteps", type=int)
     ap.add_argument("--n-envs", type=int)
-    ap.add_argument("--vec-env", choices=("dummy", "subproc"))
-    ap.add_argument("--out", type=Path)
+    ap.add_argument("--vec-env", choices=("native", "dummy", "subproc"))
+    ap.add_argument("--out", type=Path,
+                    help="run folder (default runs/<config>-s<seed>; removed if the run fails)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:

@@ -150,7 +150,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_diagnose(args: argparse.Namespace) -> int:
-    from hdgym.discrepancy.workflow import diagnose_files
+    from hdgym.discrepancy.command import diagnose_files
 
     report = diagnose_files(args.record, _params(args), out=Path(args.out),
                             validate=args.validate)
@@ -367,7 +367,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     from hdgym.progress import announce_compiles
 
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        print("hdgym: interrupted", file=sys.stderr)
+        return 130
     try:
         with announce_compiles():
             return args.fn(args)

@@ -72,7 +72,7 @@ PAGES: tuple[Page, ...] = (
          ("python", "-m", "hdgym.discrepancy.cases", "--out", "{root}/discrepancy.md")),
     Page("real-data", "real-data/report.md", "diagnosis of real ZXF17 strain-wave measurements",
          ("python", "-m", "hdgym.discrepancy.realdata", "--out", "{root}/real-data"), None),
-    Page("rl", "rl/evaluation.md", "RL policy against PI and full-current baselines",
+    Page("rl", "rl/evaluation.md", "RL policy against tuned classical controllers",
          ("python", "-m", "agents.report", "--out", "{root}/rl"),
          ("--episodes", "4", "--check-episodes", "0")),
 )

@@ -269,10 +269,15 @@ def test_ctrl_c_in_a_real_process(tmp_path):
     import signal
     import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "hdgym.cli", "simulate", "--preset",
+    driver = ("import sys, hdgym.cli, hdgym.sim, hdgym.discrepancy.experiments\n"
+              "print('ready', flush=True)\n"
+              "sys.exit(hdgym.cli.main(sys.argv[1:]))\n")
+    proc = subprocess.Popen([sys.executable, "-c", driver, "simulate", "--preset",
                              "tuttle-joint1", "--command", "random:1:20", "--duration", "300",
-                             "--out", "x.csv"], cwd=tmp_path, stderr=subprocess.PIPE, text=True)
-    time.sleep(4)  # imported and running (the whole run takes ~7 s)
+                             "--out", "x.csv"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(1.5)  # into the run (which takes several seconds)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
@@ -294,3 +299,25 @@ def test_env_step_rejects_what_box_1_cannot_hold(action):
         env.step(np.array(action) if isinstance(action, list) and action != ["0.3"] else action)
     env.step([0.3])  # a list of one number is castable
     env.step(np.array([0.3], dtype=np.float32))
+
+
+def test_train_summary_names_files_relative(tmp_path, monkeypatch):
+    """Reports name files relative to the checkout (issue 13 item 7), not by machine path."""
+    from pathlib import Path
+
+    from agents.common import DEFAULT_CONFIGS, load_config
+    from agents.train import shown
+
+    monkeypatch.chdir(tmp_path)
+    src = load_config(DEFAULT_CONFIGS["ppo"])["source"]
+    assert shown(src) == "agents/configs/resonance_ppo.toml" and not Path(shown(src)).is_absolute()
+    assert shown(tmp_path / "runs" / "x" / "final.zip") == "runs/x/final.zip"
+
+
+def test_bundled_spec_name_beside_a_folder_of_that_name(tmp_path, monkeypatch, capsys):
+    """`hdgym sweep controllers` from the checkout root, where controllers/ is a folder."""
+    (tmp_path / "controllers").mkdir()
+    monkeypatch.chdir(tmp_path)
+    results = _fake_repo(tmp_path)
+    assert main(["sweep", "controllers", "--quick", "--out", str(results / "x")]) == 2
+    assert "quick runs never write into results/" in capsys.readouterr().err  # spec was found

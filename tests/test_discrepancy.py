@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 
 from hdgym.discrepancy import cases, experiments, realdata
-from hdgym.discrepancy.registry import REGISTRY, Scales, get_value, model_params, set_values
+from hdgym.discrepancy.effect import Scales
+from hdgym.discrepancy.command import diagnose_files
+from hdgym.discrepancy.paths import get_value, set_values
+from hdgym.discrepancy.registry import REGISTRY, model_params
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
-from hdgym.discrepancy.workflow import diagnose, diagnose_files
+from hdgym.discrepancy.workflow import diagnose
 from hdgym.effects import EFFECTS
 from hdgym.record import Record, RecordError
 from hdgym.sim import Simulator
@@ -150,7 +153,7 @@ def test_breakaway_ramps_break_away_from_rest():
 
 
 def test_shooting_restarts_at_rest_keep_the_truth_exact():
-    from hdgym.discrepancy.fitting import Problem
+    from hdgym.discrepancy.problem import Problem
 
     case = cases.Case("stiction", ("stiction",), "breakaway_ramps")
     truth = cases.truth_for(case)
@@ -161,7 +164,7 @@ def test_shooting_restarts_at_rest_keep_the_truth_exact():
 
 
 def test_rest_restarts_take_the_measured_held_torque():
-    from hdgym.discrepancy.fitting import Problem
+    from hdgym.discrepancy.problem import Problem
 
     case = cases.Case("stiction", ("stiction",), "breakaway_ramps", 2.0)
     truth = cases.truth_for(case)
@@ -180,7 +183,7 @@ def test_rest_restarts_take_the_measured_held_torque():
 
 def test_friction_levels_read_breakaway_above_running_friction():
     """The breakaway signature: static level held while stuck vs running level, per side."""
-    from hdgym.discrepancy.fitting import Problem
+    from hdgym.discrepancy.problem import Problem
     from hdgym.discrepancy.residuals import friction_levels
 
     case = cases.Case("stiction", ("stiction",), "breakaway_ramps", 2.0)
@@ -215,7 +218,7 @@ def test_pattern_search_follows_a_staircase_cost():
 
 
 def test_ke_lines_follow_the_simulator_split():
-    from hdgym.discrepancy.registry import ke_lines
+    from hdgym.discrepancy.gear_effects import ke_lines
     from hdgym.params import preset
 
     p = preset("tuttle-joint1")  # flexspline grounded: circular-spline lines at n (1 - 1/161)
@@ -232,7 +235,7 @@ def test_ke_lines_follow_the_simulator_split():
 
 
 def test_ke_guess_reads_the_split_lines_of_tuttle_joint1():
-    from hdgym.discrepancy.fitting import Problem
+    from hdgym.discrepancy.problem import Problem
 
     case = cases.Case("ke", ("kinematic_error",), "slow_constant_speed", 2.0,
                       drive="tuttle-joint1")

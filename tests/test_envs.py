@@ -44,7 +44,7 @@ def test_registered_after_import():
     for env_id in IDS:
         assert env_id in gym.registry
         spec = gym.spec(env_id)
-        assert spec.max_episode_steps == 2000
+        assert spec.max_episode_steps == (3000 if "Resonance" in env_id else 2000)
         assert spec.vector_entry_point is not None
     hdgym.envs.register_envs()  # idempotent
     env = make(IDS[0])
@@ -373,3 +373,69 @@ def test_ppo_smoke():
     venv = DummyVecEnv([lambda: make(IDS[0])])
     model = PPO("MlpPolicy", venv, n_steps=128, batch_size=64, n_epochs=1, seed=0, device="cpu")
     model.learn(total_timesteps=256)
+
+
+# ------------------------------------------------------------------ the resonance task
+def test_resonance_task_rating_deadline_and_success():
+    """The registered task: the rating ends an episode, success needs the target by the
+    deadline within the rating, and info reports time to target and peak torque."""
+    from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
+
+    env = gym.make("HarmonicDriveResonance-v0")
+    u = env.unwrapped
+    assert u.batch.torque_limit == GEAR_RATINGS["tuttle-joint1"] == 200.0
+    assert u.task.deadline == DEADLINE and env.spec.max_episode_steps == 3000
+    obs, info = env.reset(seed=3)
+    assert info["time_to_target"] == -1.0 and info["success"] == 0.0
+    peak = 0.0
+    for _ in range(3000):  # constant full current: fast, but over the rating
+        obs, r, term, trunc, info = env.step(np.array([1.0], dtype=np.float32))
+        peak = max(peak, abs(info["output_torque"]))
+        assert info["peak_torque"] == pytest.approx(peak)
+        if term or trunc:
+            break
+    assert term and info["peak_torque"] > 200.0 and info["success"] == 0.0
+    assert r < -50  # the safety penalty
+    # without the rating (a huge limit) the same run reaches the target: success
+    env = gym.make("HarmonicDriveResonanceLong-v0", torque_limit=1e6)
+    assert env.unwrapped.task.deadline == LONG_DEADLINE
+    env.reset(seed=3)
+    for _ in range(3000):
+        _, _, term, trunc, info = env.step(np.array([1.0], dtype=np.float32))
+        if term or trunc:
+            break
+    assert trunc and not term
+    assert 0.0 < info["time_to_target"] < LONG_DEADLINE and info["success"] == 1.0
+    # a deadline shorter than the run-up: reached, but too late
+    env = gym.make("HarmonicDriveResonance-v0", torque_limit=1e6, deadline=0.1,
+                   max_episode_steps=3000)
+    env.reset(seed=3)
+    for _ in range(3000):
+        _, _, term, trunc, info = env.step(np.array([1.0], dtype=np.float32))
+    assert info["time_to_target"] > 0.1 and info["success"] == 0.0
+    with pytest.raises(ValueError, match="deadline"):
+        gym.make("HarmonicDriveResonance-v0", deadline=0.0)
+
+
+def test_resonance_without_torque_sensor_and_saturating_time():
+    env = gym.make("HarmonicDriveResonanceNoTorqueSensor-v0", max_episode_steps=40,
+                   horizon=0.02)
+    obs, _ = env.reset(seed=0)
+    for _ in range(30):
+        obs, *_ = env.step(np.array([1.0], dtype=np.float32))
+    assert obs[4] == 0.0 and obs[7] == 0.0  # the torque channels read 0
+    assert obs[0] > 0  # the encoders still see the speed
+    assert obs[9] == 1.0  # time / horizon saturates at 1 past the horizon
+
+
+def test_resonance_vector_env_reports_the_task_per_env():
+    v = gym.make_vec("HarmonicDriveResonance-v0", num_envs=3,
+                     vectorization_mode="vector_entry_point", torque_limit=1e6)
+    single = gym.make("HarmonicDriveResonance-v0", torque_limit=1e6)
+    v.reset(seed=11)
+    single.reset(seed=12)
+    for _ in range(1500):
+        _, _, _, _, info = v.step(np.ones((3, 1), dtype=np.float32))
+        _, _, _, _, si = single.step(np.array([1.0], dtype=np.float32))
+    for key in ("time_to_target", "peak_torque", "success"):
+        assert info[key][1] == si[key]

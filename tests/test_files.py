@@ -58,3 +58,53 @@ def test_results_guard(tmp_path):
     check_out(tmp_path / "results" / "x.md", quick=False)
     with pytest.raises(ValueError, match="quick runs never write into results/"):
         check_out(tmp_path / "results" / "x.md", quick=True)
+
+
+def test_compile_notice_once_per_block(capsys):
+    """Progress (issue 13 item 3): a numba compile inside the block is announced, once."""
+    import numba
+
+    from hdgym.progress import COMPILE_MESSAGE, announce_compiles, bar
+
+    @numba.njit
+    def f(x):
+        return x + 1
+
+    @numba.njit
+    def g(x):
+        return x * 2
+
+    with announce_compiles():
+        f(1)
+        g(1.0)
+    f(2.0)  # outside the block: a new compile says nothing
+    err = capsys.readouterr().err
+    assert err.count(COMPILE_MESSAGE) == 1
+    assert sum(bar(range(3), "x")) == 3
+
+
+LONG_JOBS = ["hdgym/reproduce/common.py", "hdgym/numerics.py", "hdgym/bench.py",
+             "hdgym/discrepancy/workflow.py", "controllers/benchmark.py", "hdgym/sweep/runner.py"]
+
+
+@pytest.mark.parametrize("path", LONG_JOBS)
+def test_long_jobs_show_progress(path):
+    """controllers, diagnose, reproduce, bench, numerics and sweep loop under a tqdm bar."""
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / path).read_text()
+    assert "from hdgym.progress import" in text or "from tqdm import tqdm" in text
+
+
+def test_reproduce_items_run_under_a_bar(tmp_path, capsys):
+    import time
+
+    from hdgym.reproduce.common import Item, Paper, run_items
+
+    def slow_item(out, quick):
+        time.sleep(0.6)  # past the bar's refresh interval
+        return Item("a", "x", "y", ["z"], True)
+
+    items = run_items(Paper("demo", "Demo", (), (slow_item, slow_item)), tmp_path, True)
+    assert [i.passed for i in items] == [True, True]
+    assert "reproduce demo" in capsys.readouterr().err

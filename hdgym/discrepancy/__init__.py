@@ -2,11 +2,18 @@
 
 Modules, one job each:
 
-* :mod:`.registry` -- the effect registry shared with the simulator switches;
+* :mod:`.registry` -- the effect registry shared with the simulator switches, built from
+  :mod:`.gear_effects` and :mod:`.friction_effects` (:mod:`.effect`: what an effect is;
+  :mod:`.paths`: dotted parameter paths);
 * :mod:`.residuals` -- comparison channels, filter, NMSE, signatures, localization;
-* :mod:`.fitting` -- bounded least-squares fits by simulation (or inverse dynamics);
-* :mod:`.workflow` -- fit, localize, name, add, refit, repeat (``hdgym diagnose``);
+* :mod:`.problem` -- a record prepared for comparison (multiple shooting in :mod:`.restarts`,
+  the inverse-dynamics comparison in :mod:`.inverse`, sizes read from it in
+  :mod:`.record_scales`);
+* :mod:`.fitting` -- bounded least-squares fits of dotted parameters;
+* :mod:`.diagnosis` -- the outcome of a diagnosis (data only);
+* :mod:`.workflow` -- fit, localize, name, add, refit, repeat;
 * :mod:`.report` -- report.json + report.md + figures, written atomically;
+* :mod:`.command` -- ``hdgym diagnose``: read records, diagnose, write the report;
 * :mod:`.experiments` -- identification protocols as command signals (``hdgym experiment``);
 * :mod:`.bench` -- timing of a diagnosis;
 * :mod:`.cases` -- hidden-effect cases (``python -m hdgym.discrepancy.cases``);

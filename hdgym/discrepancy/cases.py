@@ -42,9 +42,12 @@ from hdgym.params import (
 from hdgym.record import Record
 from hdgym.sim import Simulator
 
+from .diagnosis import Diagnosis
+from .effect import Scales
 from .experiments import PROTOCOLS, command
-from .registry import REGISTRY, Scales, core_params, get_value, set_values
-from .workflow import MIN_GAIN, THRESHOLD, VALIDATION_GAIN, Diagnosis, diagnose
+from .paths import get_value, set_values
+from .registry import REGISTRY, core_params
+from .workflow import MIN_GAIN, THRESHOLD, VALIDATION_GAIN, diagnose
 
 BASE_EFFECTS = ("coulomb_friction", "viscous_friction")
 """Effects every case joint has (the ones a base model assumes)."""

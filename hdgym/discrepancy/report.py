@@ -18,7 +18,7 @@ import numpy as np
 from hdgym.files import umask_mode
 
 from . import residuals as R
-from .workflow import Diagnosis
+from .diagnosis import Diagnosis
 
 FIGURES = {
     "residual_time": "residual against time, before and after (per channel)",

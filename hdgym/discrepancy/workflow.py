@@ -23,22 +23,22 @@ step and on a validation record when one is given.
 from __future__ import annotations
 
 import math
-import os
 import time as _time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from hdgym.params import JointParams
 from hdgym.progress import bar
-from hdgym.record import Record, read_record
+from hdgym.record import Record
 from hdgym.sim import SimulationError
 
 from . import residuals as R
-from .fitting import FitResult, Problem, fit
-from .registry import REGISTRY, get_value, model_params
+from .diagnosis import Diagnosis, Step
+from .fitting import FitResult, fit
+from .paths import get_value, set_values
+from .problem import Problem
+from .registry import REGISTRY, model_params
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -60,63 +60,6 @@ SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
 """Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
-
-
-@dataclass
-class Step:
-    """One effect added: why, what was fitted, and the NMSE after it."""
-
-    name: str
-    evidence: dict
-    values: dict[str, float]
-    nmse: dict[str, float]
-    nmse_validation: dict[str, float] | None
-    relative_improvement: float
-    candidates: list[dict]
-    params: JointParams = field(repr=False)
-
-
-@dataclass
-class Diagnosis:
-    """Everything :func:`diagnose` found (turned into report.json / report.md by :mod:`.report`)."""
-
-    source: str
-    mode: str
-    channels: tuple[str, ...]
-    base_effects: tuple[str, ...]
-    nmse_given: dict[str, float]
-    before: FitResult
-    steps: list[Step]
-    after: FitResult
-    where_before: dict
-    where_after: dict
-    final_candidates: list[dict]
-    conclusion: str
-    nmse_given_validation: dict[str, float] | None = None
-    nmse_before_validation: dict[str, float] | None = None
-    nmse_after_validation: dict[str, float] | None = None
-    validation_source: str | None = None
-    untestable: list[str] = field(default_factory=list)
-    seconds: float = 0.0
-    problem: Problem | None = field(default=None, repr=False)
-    validation: Problem | None = field(default=None, repr=False)
-    fit_window: float | None = None
-    nmse_record_before: dict[str, float] | None = None
-    nmse_record_after: dict[str, float] | None = None
-
-    @property
-    def missing_effects(self) -> list[str]:
-        return [s.name for s in self.steps]
-
-    @property
-    def nmse_before(self) -> float:
-        v = self.nmse_before_validation if self.nmse_before_validation else self.before.nmse
-        return v["mean"]
-
-    @property
-    def nmse_after(self) -> float:
-        v = self.nmse_after_validation if self.nmse_after_validation else self.after.nmse
-        return v["mean"]
 
 
 def _weighted(problem: Problem, res: dict[str, np.ndarray]) -> tuple[dict, dict]:
@@ -143,8 +86,6 @@ def _columns(problem: Problem, p: JointParams, fps, ref: np.ndarray) -> list[np.
 
 
 def _set(p: JointParams, path: str, value: float) -> JointParams:
-    from .registry import set_values
-
     return set_values(p, {path: value})
 
 
@@ -206,8 +147,6 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
     stiffness or the Stribeck velocity take a few values); parameters with
     a data-based guess (order lines, amplifier limits) are scaled around it.
     """
-    from .registry import set_values
-
     eff = REGISTRY[name]
     q = eff.switch_on(p, problem.scales)
     fps = eff.fit_params(q, problem.scales)
@@ -309,8 +248,6 @@ def _simpler_does_nearly_as_well(vprob: Problem | None, current: FitResult, winn
 
 def _reset(p: JointParams, given: JointParams, paths: list[str]) -> JointParams:
     """``p`` with the parameters at ``paths`` back at their values in ``given``."""
-    from .registry import set_values
-
     try:
         return set_values(p, {path: get_value(given, path) for path in paths})
     except ValueError:
@@ -493,21 +430,3 @@ def _where(problem: Problem, p: JointParams) -> dict:
     res = problem.residuals(p)
     _, w = _weighted(problem, res)
     return R.localize(res, w, problem.masked_context())
-
-
-def diagnose_files(record_path: str | os.PathLike[str], params: JointParams, out: Path,
-                   validate: str | os.PathLike[str] | None = None, **kwargs) -> dict:
-    """Read the record(s), diagnose, write ``out/report.json`` + ``report.md`` + figures.
-
-    A bad record raises its :class:`hdgym.record.RecordError` unchanged, before
-    anything is written (no report directory is left behind).
-
-    Returns:
-        the report.json content.
-    """
-    from .report import write_report
-
-    rec = read_record(record_path)
-    val = read_record(validate) if validate is not None else None
-    diag = diagnose(rec, params, val, **kwargs)
-    return write_report(diag, Path(out))

@@ -4,8 +4,11 @@
 
 * ``HarmonicDriveJoint-v0``: output position tracking
   (:class:`~hdgym.envs.joint.HarmonicDriveJointEnv`);
-* ``HarmonicDriveResonance-v0``: run-up through the resonance trap
-  (:class:`~hdgym.envs.resonance.HarmonicDriveResonanceEnv`);
+* ``HarmonicDriveResonance-v0``: run-up through the resonance trap by a
+  deadline within the gear rating
+  (:class:`~hdgym.envs.resonance.HarmonicDriveResonanceEnv`), with the
+  variants ``HarmonicDriveResonanceLong-v0`` (3 s deadline) and
+  ``HarmonicDriveResonanceNoTorqueSensor-v0`` (no torque sensor);
 
 each with a native vector env (:mod:`hdgym.envs.vector`) for
 ``gym.make_vec(..., vectorization_mode="vector_entry_point")``.
@@ -21,8 +24,20 @@ ENV_IDS: dict[str, tuple[str, str]] = {
                               "hdgym.envs.vector:make_joint_vector"),
     "HarmonicDriveResonance-v0": ("hdgym.envs.resonance:HarmonicDriveResonanceEnv",
                                   "hdgym.envs.vector:make_resonance_vector"),
+    "HarmonicDriveResonanceLong-v0": ("hdgym.envs.resonance:HarmonicDriveResonanceEnv",
+                                      "hdgym.envs.vector:make_resonance_vector"),
+    "HarmonicDriveResonanceNoTorqueSensor-v0": ("hdgym.envs.resonance:HarmonicDriveResonanceEnv",
+                                                "hdgym.envs.vector:make_resonance_vector"),
 }
 MAX_EPISODE_STEPS = 2000
+#: control periods per episode of the resonance task and its variants (3 s at 1 ms)
+RESONANCE_EPISODE_STEPS = 3000
+#: registered variants of the resonance task: id -> keyword arguments
+RESONANCE_VARIANTS: dict[str, dict[str, Any]] = {
+    "HarmonicDriveResonance-v0": {},
+    "HarmonicDriveResonanceLong-v0": {"deadline": 3.0},
+    "HarmonicDriveResonanceNoTorqueSensor-v0": {"sensors": {"torque_sensor": False}},
+}
 
 
 def register_envs() -> None:
@@ -32,8 +47,13 @@ def register_envs() -> None:
     for env_id, (entry, vector_entry) in ENV_IDS.items():
         if env_id in gym.registry:
             continue
-        gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
-                     max_episode_steps=MAX_EPISODE_STEPS)
+        if env_id in RESONANCE_VARIANTS:
+            gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
+                         max_episode_steps=RESONANCE_EPISODE_STEPS,
+                         kwargs=dict(RESONANCE_VARIANTS[env_id]))
+        else:
+            gym.register(id=env_id, entry_point=entry, vector_entry_point=vector_entry,
+                         max_episode_steps=MAX_EPISODE_STEPS)
 
 
 def __getattr__(name: str) -> Any:  # lazy: importing hdgym stays light

@@ -209,7 +209,7 @@ class JointBatch:
         self.obs = np.zeros((n, len(task.obs_names)), dtype=np.float32)
         self.rew = np.zeros(n)
         self.term = np.zeros(n, dtype=np.bool_)
-        self.aux = np.zeros((n, 2))
+        self.aux = np.zeros((n, len(task.aux_names)))
         self.no_fresh = np.zeros(n, dtype=np.bool_)
         self.all_fresh = np.ones(n, dtype=np.bool_)
         self.zeros2 = np.zeros((n, 2))
@@ -401,9 +401,8 @@ class HarmonicDriveEnv(gym.Env):
             s = b.xs[0, :6].tolist()
         info = dict(zip(INFO_STATES, s, strict=True))
         info["time"] = float(b.steps[0]) * b.ctrl_dt
-        aux = b.aux[0].tolist()
-        info[self._aux_names[0]] = aux[0]
-        info[self._aux_names[1]] = aux[1]
+        for name, v in zip(self._aux_names, b.aux[0].tolist(), strict=True):
+            info[name] = v
         info["diverged"] = bool(b.bad[0])
         return info
 

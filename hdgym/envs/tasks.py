@@ -258,7 +258,16 @@ class TrackingTask:
 
 R_WOSC = C_TASK  # weight of the torque-oscillation cost
 R_TAU = C_TASK + 1  # time constant of the torque mean, s
-N_RES_CONST = C_TASK + 2
+R_DEADLINE = C_TASK + 2  # s, the target must be reached by then
+R_TOL = C_TASK + 3  # relative speed tolerance of "reached"
+R_TAU_W = C_TASK + 4  # s, time constant of the speed filter that judges "reached"
+N_RES_CONST = C_TASK + 5
+
+#: relative tolerance of "target reached": the filtered motor speed within 5 % of the target
+REACH_TOLERANCE = 0.05
+#: s, time constant of the first-order filter on the true motor speed that judges "reached"
+#: (the ripple of the trap, ~30 Hz at 8,000 deg/s, must not fake an arrival)
+SPEED_FILTER_S = 0.025
 
 
 @nb.njit(cache=True, inline="always")
@@ -270,20 +279,38 @@ def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z:
 
     ``ts[i, 0]`` and ``ts[i, 1]`` hold the running means (first-order,
     time constant ``c[R_TAU]``) of the true and measured flexspline torque;
-    the oscillation is the torque minus its mean.
+    the oscillation is the torque minus its mean. ``ts[i, 2]`` is the
+    filtered true motor speed (rad/s), ``ts[i, 3]`` the time the target was
+    first reached (s, NaN before), ``ts[i, 4]`` the peak |flexspline
+    torque| so far (N m).
     """
     beta = dt / (c[R_TAU] + dt)
+    beta_w = dt / (c[R_TAU_W] + dt)
     tn = c[C_TNOM]
     x = xs[i]
     wt = tp[i, 0]
     t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
     t_true = x[TK]
+    w_true = x[W_M]
+    t = steps[i] * dt
     if fresh[i] or not math.isfinite(ts[i, 0]):
         ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
         ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
     else:
         ts[i, 0] += beta * (t_true - ts[i, 0])
         ts[i, 1] += beta * (t_meas - ts[i, 1])
+    if fresh[i]:
+        ts[i, 2] = w_true if math.isfinite(w_true) else 0.0
+        ts[i, 3] = math.nan
+        ts[i, 4] = abs(t_true) if math.isfinite(t_true) else 0.0
+    else:
+        if math.isfinite(w_true):
+            ts[i, 2] += beta_w * (w_true - ts[i, 2])
+        if ts[i, 3] != ts[i, 3] and abs(ts[i, 2] - wt) <= c[R_TOL] * wt:
+            ts[i, 3] = t
+        a_t = abs(t_true)
+        if not (a_t <= ts[i, 4]):  # NaN torque counts as over any rating
+            ts[i, 4] = a_t if math.isfinite(a_t) else math.inf
     th_m = meas[0, i]
     o = obs[i]
     o[0] = _box(meas[2, i] / wt)
@@ -295,13 +322,16 @@ def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z:
     o[6] = _box(wt / c[C_WNOM])
     o[7] = _box((t_meas - ts[i, 1]) / tn)
     o[8] = _box(act[i])
-    o[9] = _box(steps[i] * dt / c[C_HOR])
-    speed_err = min(abs(wt - x[W_M]) / wt, 2.0)
+    o[9] = min(t / c[C_HOR], 1.0)  # saturates: past the horizon it looks like its end
+    speed_err = min(abs(wt - w_true) / wt, 2.0)
     osc = (t_true - ts[i, 0]) / tn
     reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
     rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
     aux[i, 0] = wt
     aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
+    aux[i, 2] = ts[i, 3] if ts[i, 3] == ts[i, 3] else -1.0  # -1: not reached (info stays finite)
+    aux[i, 3] = ts[i, 4] if ts[i, 4] < math.inf else 1e30
+    aux[i, 4] = 1.0 if (ts[i, 3] <= c[R_DEADLINE] and ts[i, 4] <= c[C_TLIM]) else 0.0
 
 
 @nb.njit(cache=True)
@@ -327,13 +357,22 @@ def post_resonance_parallel(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z
 
 
 class ResonanceTask:
-    """Run the motor up to a target speed above the resonance trap.
+    """Run the motor up to a target speed above the resonance trap, by a deadline.
 
     Args:
         target_speed: motor (WG) speed, rad/s: a number, or ``(low, high)``
             to draw uniformly per episode. Default 10,000-12,000 deg/s.
         oscillation_weight: weight of ``((T_k - mean T_k) / T_nom)^2``.
         torque_time_constant: s, the running mean that defines the oscillation.
+        deadline: s, success needs the target reached by then (default: no
+            deadline).
+
+    "Reached": the true motor speed, filtered first-order with
+    :data:`SPEED_FILTER_S`, comes within :data:`REACH_TOLERANCE` of the
+    target. ``info`` adds ``time_to_target`` (s, -1 until reached),
+    ``peak_torque`` (largest |flexspline torque| so far, N m) and
+    ``success`` (1.0 when reached by the deadline with the peak within the
+    env's ``torque_limit``, else 0.0; final at the episode's end).
     """
 
     name = "resonance"
@@ -342,15 +381,17 @@ class ResonanceTask:
         "output_torque", "motor_current", "target_speed", "torque_oscillation",
         "previous_action", "time",
     )
-    aux_names = ("target_speed", "torque_oscillation")
+    aux_names = ("target_speed", "torque_oscillation", "time_to_target", "peak_torque",
+                 "success")
     n_params = 1
-    n_state = 2
+    n_state = 5
     post = staticmethod(post_resonance)
     post_parallel = staticmethod(post_resonance_parallel)
 
     def __init__(self, target_speed: float | tuple[float, float] = (
             math.radians(10_000.0), math.radians(12_000.0)),
-                 oscillation_weight: float = 1.0, torque_time_constant: float = 0.05) -> None:
+                 oscillation_weight: float = 1.0, torque_time_constant: float = 0.05,
+                 deadline: float = math.inf) -> None:
         lo, hi = (target_speed, target_speed) if np.isscalar(target_speed) else target_speed
         if not (0 < lo <= hi and math.isfinite(hi)):
             raise ValueError(f"target_speed must be > 0 rad/s (or 0 < low <= high), "
@@ -359,12 +400,20 @@ class ResonanceTask:
             raise ValueError(f"oscillation_weight must be >= 0, got {oscillation_weight!r}")
         if not (torque_time_constant > 0 and math.isfinite(torque_time_constant)):
             raise ValueError(f"torque_time_constant must be > 0 s, got {torque_time_constant!r}")
+        try:
+            deadline = float(deadline)
+        except (TypeError, ValueError):
+            raise ValueError(f"deadline must be a number of s, got {deadline!r}") from None
+        if not deadline > 0:
+            raise ValueError(f"deadline must be > 0 s, got {deadline!r}")
         self.target = (float(lo), float(hi))
         self.oscillation_weight = float(oscillation_weight)
         self.torque_time_constant = float(torque_time_constant)
+        self.deadline = deadline
 
     def constants(self) -> list[float]:
-        return [self.oscillation_weight, self.torque_time_constant]
+        return [self.oscillation_weight, self.torque_time_constant, self.deadline,
+                REACH_TOLERANCE, SPEED_FILTER_S]
 
     def draw(self, rng: np.random.Generator, theta0: float, horizon: float) -> np.ndarray:
         lo, hi = self.target

@@ -46,7 +46,8 @@ class HarmonicDriveVectorEnv(VectorEnv):
         task: a :class:`~hdgym.envs.tasks.TrackingTask` or
             :class:`~hdgym.envs.tasks.ResonanceTask`.
         num_envs: batch size.
-        max_episode_steps: truncation (the registration's 2000 by default).
+        max_episode_steps: truncation (the registration's by default: 2000
+            periods, 3000 for the resonance task).
         render_mode: ``"rgb_array"`` renders env 0.
         parallel: force the threaded (True) or serial (False) kernel;
             None picks by batch size.
@@ -107,8 +108,8 @@ class HarmonicDriveVectorEnv(VectorEnv):
         for k, name in enumerate(INFO_STATES):
             info[name] = s[k]
         info["time"] = b.steps * b.ctrl_dt
-        info[self.task.aux_names[0]] = b.aux[:, 0].copy()
-        info[self.task.aux_names[1]] = b.aux[:, 1].copy()
+        for k, name in enumerate(self.task.aux_names):
+            info[name] = b.aux[:, k].copy()
         info["diverged"] = b.bad.copy()
         for name in list(info):
             info["_" + name] = self._mask
@@ -178,7 +179,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
 
 
 _JOINT_TASK = ("reference", "reference_scale", "error_scale", "current_weight")
-_RES_TASK = ("target_speed", "oscillation_weight", "torque_time_constant")
+_RES_TASK = ("target_speed", "oscillation_weight", "torque_time_constant", "deadline")
 
 
 def _split(kwargs: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
@@ -192,10 +193,20 @@ def make_joint_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEn
 
 
 def make_resonance_vector(num_envs: int = 1, **kwargs: Any) -> HarmonicDriveVectorEnv:
-    """Vector entry point of ``HarmonicDriveResonance-v0``."""
-    from hdgym.envs.resonance import DEFAULT_CURRENT_LIMIT, resonance_params
+    """Vector entry point of ``HarmonicDriveResonance-v0`` (and its variants)."""
+    from hdgym.envs.resonance import (
+        DEADLINE,
+        DEFAULT_CURRENT_LIMIT,
+        HORIZON,
+        gear_rating,
+        resonance_params,
+    )
 
+    kwargs.setdefault("deadline", DEADLINE)
+    kwargs.setdefault("horizon", HORIZON)
     task = ResonanceTask(**_split(kwargs, _RES_TASK))
+    if kwargs.get("torque_limit") is None:
+        kwargs["torque_limit"] = gear_rating(kwargs.get("preset"))
     kwargs["preset"] = resonance_params(kwargs.get("preset"),
                                         kwargs.pop("current_limit", DEFAULT_CURRENT_LIMIT))
     return HarmonicDriveVectorEnv(task, num_envs, **kwargs)

@@ -133,7 +133,8 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     d_inc = dth - x[:, L.DTH]
     x[:, L.DTH] = dth
     hyst = _on(flags, "hysteresis")
-    tanh_model = hyst & (p[:, L.HMODEL] == 1.0)
+    tanh_memory = p[:, L.HMODEL] == 1.0  # kept with hysteresis off: the load history
+    tanh_model = hyst & tanh_memory
     # Maxwell-slip: eq. (4)
     t_h = np.zeros(len(x))
     diss = np.zeros(len(x))
@@ -148,16 +149,21 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
         x[:, L.HZ + k] = np.where(use, fc, x[:, L.HZ + k])
         t_h += np.where(use, fc, 0.0)
         diss += np.where(use, slip, 0.0)
-    # tanh element with last-reversal memory: eq. (5)
+    # tanh element, last-reversal memory, load history: eq. (5), docs/physics.md eqs. H1-H3
     s = x[:, L.HZ + 2]
     s_new = np.where(d_inc > REVERSAL_DEADBAND, 1.0, np.where(d_inc < -REVERSAL_DEADBAND, -1.0, s))
-    rev = tanh_model & (s_new != s)
+    rev = tanh_memory & (s_new != s)
+    a_k = np.abs(x[:, L.TK])  # transmitted torque of the previous substep
+    load = np.where(rev, a_k, np.maximum(x[:, L.HZ + 4], a_k))
+    x[:, L.HZ + 4] = np.where(tanh_memory, load, x[:, L.HZ + 4])
     x[:, L.HZ] = np.where(rev, dth - d_inc, x[:, L.HZ])
     x[:, L.HZ + 1] = np.where(rev, x[:, L.HZ + 3], x[:, L.HZ + 1])
     x[:, L.HZ + 2] = np.where(rev, s_new, s)
     s = x[:, L.HZ + 2]
     dts = x[:, L.HZ + 1]
-    th_tanh = dts + (s * p[:, L.TANH_B] - dts) * np.tanh(p[:, L.TANH_G] * s * (dth - x[:, L.HZ]))
+    width = p[:, L.TANH_B] + p[:, L.TANH_B1] * load
+    gam = np.maximum(p[:, L.TANH_G] + p[:, L.TANH_G1] * load, 0.0)
+    th_tanh = dts + (s * width - dts) * np.tanh(gam * s * (dth - x[:, L.HZ]))
     x[:, L.HZ + 3] = np.where(tanh_model, th_tanh, x[:, L.HZ + 3])
     t_h = np.where(tanh_model, th_tanh, t_h)
     # eqs. (3), (6)
@@ -174,7 +180,8 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.CUR] = cur
     t_m = p[:, L.KT] * cur
     x[:, L.T_MOTOR] = t_m
-    zero = np.zeros(len(x))
+    startup = np.where(tanh_memory & _on(flags, "load_dependent_friction"),  # eq. H4
+                       p[:, L.STARTUP1] * x[:, L.HZ + 4], 0.0)
     mu = np.where(_on(flags, "load_dependent_friction"), p[:, L.MU_LOAD], 0.0)
     # eq. (8): the transmission friction acts at the output speed (placement output) or at
     # the mesh speed w_m * gear, reflected to the WG by `gear` (placement mesh)
@@ -183,7 +190,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     lvl_t = _level(p, L.FOUT, v_rel, th_m, th_o, mu * np.abs(t_k), flags)
     vis_t = _visc(p, L.FOUT, v_rel, flags)
     g_m = np.where(mesh, gear, 0.0)
-    lvl = _level(p, L.FIN, w_m, th_m, th_o, zero, flags) + g_m * lvl_t
+    lvl = _level(p, L.FIN, w_m, th_m, th_o, startup, flags) + g_m * lvl_t
     vis = _visc(p, L.FIN, w_m, flags) + g_m * g_m * vis_t
     w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], vis, lvl, dt)
     t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext

@@ -77,7 +77,7 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     if address is not None and backend != "ray":
         raise ValueError("--address is for --backend ray")
     bundled = _BUNDLED.joinpath(f"{spec_path}.toml")
-    if not Path(spec_path).exists() and bundled.is_file():  # a bundled spec's name
+    if not Path(spec_path).is_file() and bundled.is_file():  # a bundled spec's name
         spec_file: str | Path = Path(str(bundled))
     else:
         spec_file = spec_path

@@ -1,0 +1,68 @@
+"""The outcome of a diagnosis (:class:`Diagnosis`), below both the workflow that makes it
+(:mod:`.workflow`) and the report that renders it (:mod:`.report`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hdgym.params import JointParams
+
+from .fitting import FitResult
+from .problem import Problem
+
+
+@dataclass
+class Step:
+    """One effect added: why, what was fitted, and the NMSE after it."""
+
+    name: str
+    evidence: dict
+    values: dict[str, float]
+    nmse: dict[str, float]
+    nmse_validation: dict[str, float] | None
+    relative_improvement: float
+    candidates: list[dict]
+    params: JointParams = field(repr=False)
+
+
+@dataclass
+class Diagnosis:
+    """Everything :func:`diagnose` found (turned into report.json / report.md by :mod:`.report`)."""
+
+    source: str
+    mode: str
+    channels: tuple[str, ...]
+    base_effects: tuple[str, ...]
+    nmse_given: dict[str, float]
+    before: FitResult
+    steps: list[Step]
+    after: FitResult
+    where_before: dict
+    where_after: dict
+    final_candidates: list[dict]
+    conclusion: str
+    nmse_given_validation: dict[str, float] | None = None
+    nmse_before_validation: dict[str, float] | None = None
+    nmse_after_validation: dict[str, float] | None = None
+    validation_source: str | None = None
+    untestable: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    problem: Problem | None = field(default=None, repr=False)
+    validation: Problem | None = field(default=None, repr=False)
+    fit_window: float | None = None
+    nmse_record_before: dict[str, float] | None = None
+    nmse_record_after: dict[str, float] | None = None
+
+    @property
+    def missing_effects(self) -> list[str]:
+        return [s.name for s in self.steps]
+
+    @property
+    def nmse_before(self) -> float:
+        v = self.nmse_before_validation if self.nmse_before_validation else self.before.nmse
+        return v["mean"]
+
+    @property
+    def nmse_after(self) -> float:
+        v = self.nmse_after_validation if self.nmse_after_validation else self.after.nmse
+        return v["mean"]

@@ -1,0 +1,236 @@
+"""Friction effects of the registry: Coulomb, viscous, Stribeck, stiction, position- and
+load-dependent friction, and the friction sides a record can inform.
+
+Each effect is four functions (fit parameters, switch-on values, neutral values; see
+:class:`.effect.Effect`); :mod:`.registry` puts them together.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from hdgym.params import JointParams
+
+from .effect import Effect, FitParam, Scales, free_output, simulated
+
+RIPPLE_ORDERS = (1.0, 2.0)
+
+
+def _sides(s: Scales) -> tuple[str, ...]:
+    """Friction sides a record can inform: the motor side only when the output is locked,
+    the output side only in the rigid (inverse) comparison, where both are one lumped
+    friction."""
+    if s.locked:
+        return ("input",)
+    return ("output",) if s.inverse else ("output", "input")
+
+
+def _one_side(s: Scales) -> tuple[str, ...]:
+    """Sides whose static friction is fitted: the motor side when the output is locked, the
+    lumped output side in the rigid (inverse) comparison, else both (the motor breaks away
+    before it winds up the spring enough to break the output loose)."""
+    return _sides(s)
+
+
+def _t_side(p: JointParams, s: Scales, side: str) -> float:
+    """Torque scale on a friction side (motor-referred on the input side)."""
+    return s.torque if side == "output" else s.torque / p.ratio
+
+
+def _w_side(p: JointParams, s: Scales, side: str) -> float:
+    return s.speed if side == "output" else s.speed * p.ratio
+
+
+def _harmonic_guess(guess, order: float) -> tuple[float, float]:
+    for o, a, b in guess:
+        if o == order:
+            return math.hypot(a, b), math.atan2(b, a)
+    return 0.0, 0.0
+
+
+
+def _ripple_side(s: Scales) -> str:
+    return "input" if s.locked else "output"
+
+
+def _posdep_params(p, s):
+    out = []
+    for side in ("input", "output"):
+        fs = getattr(p.friction, side)
+        a = 0.7 * max(fs.coulomb, 1e-9)
+        for k in range(len(fs.ripple)):
+            out += [FitParam(f"friction.{side}.ripple[{k}].{c}", -a, a) for c in ("sin", "cos")]
+    return out
+
+
+def _posdep_on(p, s):
+    side = _ripple_side(s)
+    rip = []
+    for o in RIPPLE_ORDERS:
+        amp, ph = _harmonic_guess(s.ripple, o) if side == "output" else (0.0, 0.0)
+        rip.append({"order": o, "amplitude": amp, "frame": "input", "phase": ph})
+    d: dict[str, Any] = {f"@friction.{side}.ripple": rip}
+    fs = getattr(p.friction, side)
+    if fs.coulomb <= 0:
+        d[f"friction.{side}.coulomb"] = 0.1 * _t_side(p, s, side)
+    return d
+
+
+def _posdep_neutral(d):
+    for side in ("input", "output"):
+        d["friction"][side]["ripple"] = []
+
+
+def _coul_params(p, s):
+    return [FitParam(f"friction.{side}.coulomb", 0.0, _t_side(p, s, side))
+            for side in _sides(s)]
+
+
+def _coul_on(p, s):
+    out = {}
+    for side in _sides(s):
+        f = 0.005 if (side == "input" and not s.locked) else 0.02
+        out[f"friction.{side}.coulomb"] = f * _t_side(p, s, side)
+    return out
+
+
+def _coul_neutral(d):
+    for side in ("input", "output"):
+        d["friction"][side]["coulomb"] = 0.0
+        d["friction"][side]["ripple"] = []
+
+
+def _visc_params(p, s):
+    return [FitParam(f"friction.{side}.viscous", 0.0,
+                     2.0 * _t_side(p, s, side) / max(_w_side(p, s, side), 1e-9))
+            for side in _sides(s)]
+
+
+def _visc_on(p, s):
+    out = {}
+    for side in _sides(s):
+        out[f"friction.{side}.viscous"] = (0.01 * _t_side(p, s, side)
+                                           / max(_w_side(p, s, side), 1e-9))
+        out[f"friction.{side}.cubic"] = 0.0
+    return out
+
+
+def _visc_neutral(d):
+    for side in ("input", "output"):
+        d["friction"][side]["viscous"] = 0.0
+        d["friction"][side]["cubic"] = 0.0
+
+
+def _strib_params(p, s):
+    out = []
+    for side in _one_side(s):
+        w = _w_side(p, s, side)
+        out += [FitParam(f"friction.{side}.breakaway_excess", 0.0, _t_side(p, s, side)),
+                FitParam(f"friction.{side}.stribeck_velocity", 1e-3 * w, 2.0 * w)]
+    return out
+
+
+def _strib_on(p, s):
+    out = _static_on(p, s, 0.02, running=False)
+    for side in _one_side(s):
+        out[f"friction.{side}.stribeck_velocity"] = 0.05 * _w_side(p, s, side)
+    return out
+
+
+def _levels(p: JointParams, s: Scales, side: str) -> tuple[float, float] | None:
+    """``(static, running)`` levels of one friction side from the record, or None.
+
+    A ``lumped`` reading (no torque sensor) goes to the output side, less what the
+    model's motor side holds through the gear.
+    """
+    got = {name: (st, run) for name, st, run in s.static}
+    if side in got:
+        return got[side]
+    if side == "output" and "lumped" in got:
+        fi = p.friction.input
+        st, run = got["lumped"]
+        return max(st - fi.breakaway * p.ratio, 0.0), max(run - fi.coulomb * p.ratio, 0.0)
+    return None
+
+
+def _static_on(p, s, default: float, running: bool = True) -> dict[str, float]:
+    """A static (breakaway) level switched on: from the record's levels where it has them.
+
+    The largest torque held while stuck sets the breakaway level. For stiction
+    (``running``) the running level sets ``coulomb`` too: the base fit had to
+    stretch its Coulomb level towards the breakaway, and with a static level
+    present the record's running level is the better start. (Stribeck friction
+    keeps the fitted level: its friction falls with speed, so the level averaged
+    over the runs is not its Coulomb level.) Sides the record cannot show start at
+    ``default`` x the side's torque scale.
+    """
+    out = {}
+    for side in _one_side(s):
+        lv = _levels(p, s, side)
+        if lv is None or lv[1] <= 0:
+            out[f"friction.{side}.breakaway_excess"] = default * _t_side(p, s, side)
+            continue
+        static, run = lv
+        coulomb = run if running else getattr(p.friction, side).coulomb
+        if running:
+            out[f"friction.{side}.coulomb"] = coulomb
+        out[f"friction.{side}.breakaway_excess"] = max(static - coulomb, 0.0)
+    return out
+
+
+def _static_sized(s: Scales) -> bool:
+    return bool(s.static)
+
+
+def _stick_params(p, s):
+    return [FitParam(f"friction.{side}.breakaway_excess", 0.0, _t_side(p, s, side))
+            for side in _one_side(s)]
+
+
+def _stick_on(p, s):
+    return _static_on(p, s, 0.02)
+
+
+def _break_neutral(d):
+    for side in ("input", "output"):
+        d["friction"][side]["breakaway"] = d["friction"][side]["coulomb"]
+
+
+def _load_params(p, s):
+    return [FitParam("friction.tooth_mu", 0.0, 1.0)]
+
+
+def _load_on(p, s):
+    return {"friction.tooth_mu": 0.02}
+
+
+def _load_neutral(d):
+    d["friction"]["tooth_mu"] = 0.0
+
+
+FRICTION_EFFECTS: tuple[Effect, ...] = (
+    Effect("coulomb_friction", "sign_steps",
+           "Coulomb friction: residual steps with the sign of the velocity",
+           _coul_params, _coul_on, _coul_neutral),
+    Effect("viscous_friction", "speed_bins",
+           "viscous friction: residual grows with speed",
+           _visc_params, _visc_on, _visc_neutral),
+    Effect("stribeck_friction", "speed_bins_low",
+           "Stribeck friction: extra friction that decays with speed",
+           _strib_params, _strib_on, _break_neutral, requires=("coulomb_friction",),
+           sized=_static_sized),
+    Effect("stiction", "breakaway",
+           "stiction: breakaway torque above the running friction",
+           _stick_params, _stick_on, _break_neutral, requires=("coulomb_friction",),
+           testable=simulated, sized=_static_sized),
+    Effect("position_dependent_friction", "order_lines_speed",
+           "position-dependent friction: friction ripple at orders of the WG angle",
+           _posdep_params, _posdep_on, _posdep_neutral, requires=("coulomb_friction",),
+           testable=free_output),
+    Effect("load_dependent_friction", "torque_dependence",
+           "load-dependent tooth friction: friction grows with the transmitted torque",
+           _load_params, _load_on, _load_neutral, requires=("coulomb_friction",),
+           testable=free_output),
+)
+"""The friction effects, in vocabulary order."""

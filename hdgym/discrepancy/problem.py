@@ -1,0 +1,267 @@
+"""A record prepared for comparison with models (:class:`Problem`).
+
+Two ways to compare a model with a record (:class:`Problem`):
+
+``simulate`` (output error, the default)
+    re-simulate the record's ``current_command`` and ``load_torque`` with
+    :class:`hdgym.sim.Simulator` (true states, ``sensors=False``), quantize
+    the simulated angles with the drive's encoder resolution, and compare
+    the filtered channels the record has (:mod:`.residuals`).
+``inverse`` (equation error, for closed-loop records)
+    a record taken under a position controller cannot be re-simulated from
+    its current alone (a tiny friction error makes the open-loop position
+    drift away); instead the measured motion is pushed through the model's
+    rigid-joint inverse dynamics (inertia, friction of both sides with the
+    simulator's own friction functions) and the predicted current is
+    compared with the measured one while the joint moves.
+
+Residuals are scaled so that the least-squares cost is the sum over
+channels of NMSE/100; the NMSE reported is the mean over channels.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hdgym.params import Integration, JointParams
+from hdgym.physics import layout as L
+from hdgym.record import Record
+from hdgym.sim import SimulationError, Simulator
+
+from . import residuals as R
+from .effect import Scales
+from .inverse import InverseComparison
+from .record_scales import RecordScales
+from .restarts import Restarts
+
+BAD = 10.0  # residual per sample (in channel sigmas) of a run that diverged
+
+
+def with_sample_time(p: JointParams, dt: float) -> JointParams:
+    """``p`` with ``ctrl_dt = dt``, keeping the physics substep no longer than before."""
+    if abs(p.integration.ctrl_dt - dt) <= 1e-9 * dt:
+        return p
+    sub = p.integration.dt
+    n = max(1, math.ceil(dt / sub - 1e-9))
+    return p.set("integration", Integration(ctrl_dt=dt, n_substeps=n))
+
+
+
+def excluded_samples(rec: Record) -> np.ndarray:
+    """Samples inside the record's ``exclude`` spans (metadata ``t0:t1;t0:t1``, s)."""
+    t = np.asarray(rec.time, dtype=float)
+    out = np.zeros(t.size, dtype=bool)
+    text = rec.meta.get("exclude", "").strip()
+    for part in filter(None, text.split(";")):
+        try:
+            a, b = (float(x) for x in part.split(":"))
+        except ValueError:
+            raise ValueError(f"{rec.source}: metadata 'exclude': {part!r} is not t0:t1 "
+                             f"(seconds)") from None
+        out |= (t >= a) & (t <= b)
+    return out
+
+
+@dataclass
+class Problem(Restarts, InverseComparison, RecordScales):
+    """A record prepared for comparison with models.
+
+    Args:
+        record: the measured (or simulated) record.
+        params: the drive (sets ratio, encoders and sample time).
+        mode: ``"simulate"``, ``"inverse"`` or ``"auto"`` (inverse when the
+            record's metadata says ``loop: closed`` or it has no
+            ``current_command``).
+        cutoff: filter cutoff, Hz (default :func:`residuals.default_cutoff`).
+        channels: compare exactly these channels (a validation record uses
+            the training record's), default: what the record supports.
+        segment: free-output records are simulated in segments of this many
+            seconds, each restarted from the measured angles, speeds and
+            current (multiple shooting), so a small speed error cannot grow
+            into a position drift that scrambles position-periodic effects
+            (0 or None: one run). Restarts happen only while the measured
+            joint moves (faster than 10 % of its typical speed), or early in a
+            pause in which the measured joint stands still (no encoder count
+            for :data:`.restarts.REST_PAUSE`; restarted at zero speed and, with a torque
+            sensor, at the measured held torque), so sticking and breakaway stay
+            the model's own.
+    """
+
+    record: Record
+    params: JointParams
+    mode: str = "auto"
+    cutoff: float | None = None
+    channels: tuple[str, ...] | None = None
+    segment: float = 0.5
+    names: tuple[str, ...] = field(init=False)
+    measured: dict[str, np.ndarray] = field(init=False)
+    sigma2: dict[str, float] = field(init=False)
+    context: R.Context = field(init=False)
+    scales: Scales = field(init=False)
+    mask: np.ndarray | None = field(init=False, default=None)
+
+    def __post_init__(self) -> None:
+        rec = self.record
+        self.dt = float(rec.dt)
+        self.cutoff = self.cutoff or R.default_cutoff(self.dt)
+        self.locked = rec.locked_output
+        self.ratio = float(rec.ratio or self.params.ratio)
+        if self.mode == "auto":
+            closed = rec.meta.get("loop", "") == "closed" or not rec.has("current_command")
+            self.mode = "inverse" if closed else "simulate"
+        if self.mode not in ("simulate", "inverse"):
+            raise ValueError(f"mode must be simulate, inverse or auto, got {self.mode!r}")
+        self.inverse = self.mode == "inverse"
+        if self.inverse and (not rec.has("motor_current") or rec.output_angle is None):
+            raise ValueError(f"{rec.source}: the inverse comparison needs motor_current and "
+                             f"output_angle columns")
+        if not self.inverse and not rec.has("current_command"):
+            raise ValueError(f"{rec.source}: no column 'current_command' to simulate")
+        s = self.params.sensors
+        self.counts = (float(s.motor_counts), float(s.output_counts))
+        self.u = (np.asarray(rec.current_command, dtype=float) if rec.has("current_command")
+                  else np.asarray(rec.motor_current, dtype=float))
+        tl = rec.load_torque  # external load applied on top of the model's own load
+        self.t_ext = np.zeros(len(rec)) if tl is None else np.asarray(tl, dtype=float).copy()
+        raw = R.Raw(motor_angle=np.asarray(rec.motor_angle, dtype=float),
+                    output_angle=None if self.locked else rec.output_angle,
+                    output_torque=rec.output_torque, motor_current=rec.motor_current)
+        self.raw = raw
+        self.names = R.pick_channels(raw, self.locked, self.ratio, self.dt, self.cutoff,
+                                     *self.counts, inverse=self.inverse)
+        if self.channels is not None:
+            missing = [c for c in self.channels if c not in R.CHANNEL_UNITS]
+            if missing:
+                raise ValueError(f"unknown channel(s) {missing}")
+            self.names = tuple(self.channels)
+        self.measured = R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
+        if self.inverse:
+            self._prepare_inverse()
+        else:
+            self._prepare_shooting()
+        excluded = excluded_samples(rec)
+        if excluded.any():  # spans the record says not to compare (e.g. fault-flagged rows)
+            self.mask = ~excluded if self.mask is None else self.mask & ~excluded
+        self.sigma2 = {k: max(float(np.var(self._m(v))), 1e-300)
+                       for k, v in self.measured.items()}
+        self.context = self._context()
+        self.scales = self._scales()
+
+    # -- helpers
+
+    def _m(self, x: np.ndarray) -> np.ndarray:
+        return x if self.mask is None else x[self.mask]
+
+    stick_slip: bool = field(init=False, default=False)
+    """Whether the joint stops and sticks in the record (restarts at rest; see
+    :func:`fit`'s ``search``)."""
+
+    def _context(self) -> R.Context:
+        raw = self.raw
+        th_m = R.lowpass(raw.motor_angle, self.dt, self.cutoff)
+        speed = np.gradient(th_m, self.dt)
+        torsion = None
+        if self.locked:
+            torsion = th_m / self.ratio
+        elif raw.output_angle is not None and "transmission_error" in self.names:
+            torsion = th_m / self.ratio - R.lowpass(raw.output_angle, self.dt, self.cutoff)
+        current = raw.motor_current if raw.motor_current is not None else self.u
+        current = R.lowpass(current, self.dt, self.cutoff)
+        if raw.output_torque is not None:
+            torque = R.lowpass(raw.output_torque, self.dt, self.cutoff)
+        else:
+            torque = self.params.motor.torque_constant * self.ratio * current
+        return R.Context(time=np.asarray(self.record.time), theta_m=th_m, speed=speed,
+                         torsion=torsion, torque=torque, current=current, dt=self.dt,
+                         cutoff=self.cutoff, held=self._held(speed))
+
+    def masked_context(self) -> R.Context:
+        """The context restricted to the compared samples (all of them in simulate mode)."""
+        c, m = self.context, self.mask
+        if m is None:
+            return c
+        return R.Context(time=c.time[m], theta_m=c.theta_m[m], speed=c.speed[m],
+                         torsion=None if c.torsion is None else c.torsion[m],
+                         torque=None if c.torque is None else c.torque[m],
+                         current=c.current[m], dt=c.dt, cutoff=c.cutoff)
+
+    # -- model output
+
+    def predict(self, p: JointParams) -> dict[str, np.ndarray]:
+        """The model's filtered channels for this record (raises SimulationError)."""
+        if self.inverse:
+            return {"motor_current": self._inverse(p)}
+        p = with_sample_time(p, self.dt)
+        sim = Simulator(p, locked_output=self.locked, sensors=False)
+        x0 = sim.initial_state(float(self.raw.motor_angle[0]))
+        n = self.u.size
+        seg = n if (self.locked or not self.segment) else max(int(round(self.segment / self.dt)), 2)
+        if seg >= n:
+            _, _, _, st = sim.trajectory(self.u, load_torque=self.t_ext, state=x0)
+        else:
+            st = np.empty((n, L.N_STATE))
+            a = 0
+            rest = self.rest_points
+            # a restart at rest may move a model that is still running back onto the measured
+            # angle; the compared channels follow the model's own (continuous) angle, so the
+            # jump does not show as a spike in the differentiated speed
+            jump = np.zeros(2)
+            while a < n:
+                b = min(a + seg, n)
+                j = int(np.searchsorted(rest, a, side="right"))
+                at_rest = j < rest.size and rest[j] <= b
+                if at_rest:  # a pause starts before the segment would end: restart at rest
+                    b = int(rest[j])
+                else:
+                    while b < n and not self.x_moving[b]:  # never restart a joint mid-pause
+                        b += 1
+                if n - b < 2:
+                    b, at_rest = n, False
+                e = min(b + 1, n)
+                _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x0)
+                st[a:b] = part[: b - a]
+                st[a:b, L.TH_M] -= jump[0]
+                st[a:b, L.TH_O] -= jump[1]
+                if b < n:
+                    x0 = self._restart(part[b - a].copy(), b, p, at_rest)
+                    if at_rest:
+                        jump[0] += x0[L.TH_M] - part[b - a, L.TH_M]
+                        jump[1] += x0[L.TH_O] - part[b - a, L.TH_O]
+                a = b
+        mc, oc = self.counts
+        raw = R.Raw(motor_angle=R.quantize(st[:, L.TH_M], mc),
+                    output_angle=None if self.locked else R.quantize(st[:, L.TH_O], oc),
+                    output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
+        return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
+
+    def residuals(self, p: JointParams) -> dict[str, np.ndarray]:
+        """Model minus measurement, per channel (masked samples dropped in inverse mode)."""
+        pred = self.predict(p)
+        return {k: self._m(pred[k] - self.measured[k]) for k in self.names}
+
+    def nmse(self, p: JointParams) -> dict[str, float]:
+        """NMSE% per channel and ``"mean"`` over channels (inf if the run diverged)."""
+        try:
+            res = self.residuals(p)
+        except SimulationError:
+            return {**{k: math.inf for k in self.names}, "mean": math.inf}
+        out = {k: 100.0 * float(np.mean(r**2)) / self.sigma2[k] for k, r in res.items()}
+        out["mean"] = float(np.mean(list(out.values())))
+        return out
+
+    def vector(self, p: JointParams, decimate: int = 1) -> np.ndarray:
+        """Stacked scaled residuals; ``0.5 |v|^2 = 0.5 sum NMSE/100``."""
+        try:
+            res = self.residuals(p)
+        except (SimulationError, FloatingPointError):
+            n = sum(self._m(self.measured[k])[::decimate].size for k in self.names)
+            return np.full(n, BAD)
+        parts = []
+        for k, r in res.items():
+            r = r[::decimate]
+            parts.append(r / math.sqrt(self.sigma2[k] * r.size))
+        v = np.concatenate(parts)
+        return np.where(np.isfinite(v), v, BAD)

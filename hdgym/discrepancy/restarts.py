@@ -1,0 +1,209 @@
+"""Multiple shooting: where a simulated segment restarts, and from which state.
+
+A free-output record is simulated in segments (:meth:`.problem.Problem.predict`); each
+restarts from the measured state. :class:`Restarts` (a part of :class:`.problem.Problem`)
+finds the pauses (no encoder count for :data:`REST_PAUSE`) and builds the restart state, at
+rest with the measured held torque where a torque sensor has one.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hdgym.effects import BIT, flags_of
+from hdgym.params import JointParams
+from hdgym.physics import kernel
+from hdgym.physics import layout as L
+from hdgym.record import Record
+
+from . import residuals as R
+
+REST_PAUSE = 0.03
+"""Seconds without an encoder count that make a pause (a restart point, see :class:`Problem`)."""
+REST_MARGIN = 0.015
+"""The restart point lies this long after the pause's first count-free sample (a stopping
+joint may creep for a few ms within one count)."""
+
+
+def pauses(angle: np.ndarray, m: int) -> np.ndarray:
+    """Samples inside a run of at least ``m`` + 1 samples with the same encoder count."""
+    same = np.diff(angle) == 0
+    out = np.zeros(angle.size, dtype=bool)
+    run = 0
+    for k, s in enumerate(np.append(same, False)):
+        if s:
+            run += 1
+            continue
+        if run >= m:
+            out[k - run:k + 1] = True
+        run = 0
+    return out
+
+
+def holdable(torque: float, t_motor: float, t_load: float, gear: float, row: np.ndarray,
+              flags: int, th_m: float, th_o: float) -> float:
+    """The transmitted torque nearest ``torque`` at which the model can stand still.
+
+    At rest the output friction must hold ``torque - t_load`` and the motor
+    friction ``t_motor - gear torque``, each within its static level (the
+    model's own, at this angle). A measured held torque the model cannot hold is
+    clipped to what it can (when the two sides allow no common torque, to what the
+    output side can hold and the motor slips), so a restart never starts the model
+    with a slip it could not have reached (the cost stays continuous in the static
+    levels) while the torque it fails to hold still shows in the residual.
+    """
+    mu = row[L.MU_LOAD] if flags & BIT["load_dependent_friction"] else 0.0
+    l_out = kernel._friction_level(row, L.FOUT, 0.0, th_m, th_o, mu * abs(torque), flags)
+    l_in = kernel._friction_level(row, L.FIN, 0.0, th_m, th_o, 0.0, flags)
+    lo, hi = t_load - l_out, t_load + l_out
+    if gear > 0:
+        lo_m, hi_m = (t_motor - l_in) / gear, (t_motor + l_in) / gear
+        if max(lo, lo_m) <= min(hi, hi_m):
+            lo, hi = max(lo, lo_m), min(hi, hi_m)
+    return min(max(torque, lo), hi)
+
+
+def held_torsion(torque: float, x: np.ndarray, row: np.ndarray, flags: int) -> float:
+    """Torsion (output rad) at which the model's flexspline holds ``torque`` at rest.
+
+    The hysteresis memory in ``x`` is kept; the spring takes the rest (the spring
+    torque is monotonic in the torsion, so bisection finds it).
+    """
+    t_h = 0.0
+    if flags & BIT["hysteresis"]:
+        t_h = (x[L.HZ + 3] if row[L.HMODEL] == 1.0
+               else float(np.sum(x[L.HZ:L.HZ + int(row[L.NSLIP])])))
+    target = torque - t_h
+    x0 = target / row[L.K1]
+    lo, hi = x0 - abs(x0) - 1e-9, x0 + abs(x0) + 1e-9
+    while kernel.spring_torque(lo, row, flags) > target:
+        lo -= 2 * (hi - lo)
+    while kernel.spring_torque(hi, row, flags) < target:
+        hi += 2 * (hi - lo)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if kernel.spring_torque(mid, row, flags) < target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * max(abs(mid), 1e-12):
+            break
+    return 0.5 * (lo + hi)
+
+
+
+class Restarts:
+    """The multiple-shooting part of :class:`.problem.Problem` (uses its record arrays)."""
+
+    record: Record
+    raw: R.Raw
+    names: tuple[str, ...]
+    dt: float
+    cutoff: float
+    ratio: float
+    counts: tuple[float, float]
+    t_ext: np.ndarray
+
+    def _prepare_shooting(self) -> None:
+        """Measured states to restart simulation segments from (filtered, de-biased)."""
+        mc, oc = self.counts
+        qm = 2 * math.pi / mc if mc else 0.0
+        self.x_th_m = R.lowpass(self.raw.motor_angle, self.dt, self.cutoff) + qm / 2
+        self.x_w_m = np.gradient(self.x_th_m, self.dt)
+        typical = float(np.quantile(np.abs(self.x_w_m), 0.9))
+        self.x_moving = np.abs(self.x_w_m) > 0.1 * typical
+        self.x_cur = (R.lowpass(self.raw.motor_current, self.dt, self.cutoff)
+                      if self.raw.motor_current is not None else None)
+        self.x_rest_angle = np.asarray(self.raw.motor_angle, dtype=float) + qm / 2
+        self.rest_points = self._rest_points()
+        self.stick_slip = bool(self.rest_points.size)
+
+    def _rest_points(self) -> np.ndarray:
+        """Samples shortly after the measured joint has come to rest.
+
+        A pause is :data:`REST_PAUSE` seconds or more in which no encoder count
+        changes; the restart point lies :data:`REST_MARGIN` after its start. There
+        the measured state is exact (speeds zero, angles known to a count), so a
+        segment can restart from it without injecting a speed error, while the
+        rest of the pause and the breakaway that ends it stay the model's own (a
+        model that breaks away too early or too late shows it). With a torque sensor
+        the torque the stuck joint holds is known too (``rest_torque``, its mean over
+        the pause), so the restart also takes the measured torsion: a stop whose held
+        torque the model got wrong (it depends on the phase of the ringing at the
+        stop) does not carry into the next breakaway, and each breakaway is compared
+        from the measured state, event by event.
+        """
+        m = int(round(REST_PAUSE / self.dt))
+        margin = int(round(REST_MARGIN / self.dt))
+        still = np.diff(self.raw.motor_angle) == 0
+        if self.raw.output_angle is not None:
+            still &= np.diff(np.asarray(self.raw.output_angle, dtype=float)) == 0
+        torque = (np.asarray(self.raw.output_torque, dtype=float)
+                  if "output_torque" in self.names else None)
+        out, held = [], []
+        run = 0
+        for k, s in enumerate(np.append(still, False)):  # still[k]: no count from k to k+1
+            if s:
+                run += 1
+                continue
+            if run >= m:
+                out.append(k - run + margin)
+                if torque is not None:  # samples k - run .. k share their counts
+                    held.append(float(np.mean(torque[k - run:k + 1])))
+            run = 0
+        self.rest_torque = np.asarray(held) if torque is not None else None
+        return np.asarray(out, dtype=int)
+
+    def _restart(self, x: np.ndarray, k: int, p: JointParams, at_rest: bool = False
+                 ) -> np.ndarray:
+        """Sim state ``x`` at sample ``k`` moved onto the measured motor angle, speed, current.
+
+        The output follows with the simulation's own torsion and torsion rate (and
+        hysteresis memory), so a restart injects no torque: only the drift of the
+        motor angle is removed. At rest with a torque sensor, the torsion is the one
+        at which the model holds the measured torque (:func:`holdable`,
+        :func:`held_torsion`).
+        """
+        r = self.ratio
+        row = L.pack(p)
+        ke_on = "kinematic_error" in p.effects
+
+        def ke(th: float) -> tuple[float, float]:
+            if not ke_on:
+                return 0.0, 0.0
+            v = d = 0.0
+            for j in range(int(row[L.NKE])):
+                a = row[L.KE_ORD + j] * th + row[L.KE_PH + j]
+                v += row[L.KE_AMP + j] * math.sin(a)
+                d += row[L.KE_AMP + j] * row[L.KE_ORD + j] * math.cos(a)
+            return v, d
+
+        k0, d0 = ke(x[L.TH_M])
+        tors = x[L.TH_M] / r - x[L.TH_O] - k0
+        rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
+        if self.x_cur is not None:
+            x[L.CUR] = self.x_cur[k]
+        if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
+            x[L.TH_M] = self.x_rest_angle[k]
+            x[L.W_M] = 0.0
+            k1, d1 = ke(x[L.TH_M])
+            x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+            x[L.W_O] = 0.0
+            if self.rest_torque is not None:  # and the torque it holds
+                flags = flags_of(p.effects)
+                t_load = row[L.LOAD_T] + self.t_ext[k] + row[L.GRAV] * math.sin(x[L.TH_O])
+                held = holdable(float(self.rest_torque[np.searchsorted(self.rest_points, k)]),
+                                 row[L.KT] * x[L.CUR], t_load, 1 / r - d1, row, flags,
+                                 x[L.TH_M], x[L.TH_O])
+                tors = held_torsion(held, x, row, flags)
+                x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+        else:
+            x[L.TH_M] = self.x_th_m[k]
+            x[L.W_M] = self.x_w_m[k]
+            k1, d1 = ke(x[L.TH_M])
+            x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+            x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
+        x[L.DTH] = tors
+        return x
