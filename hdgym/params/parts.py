@@ -146,8 +146,19 @@ class Hysteresis:
             element with last-reversal memory).
         element_stiffness: kappa_i of the Maxwell-slip elements, N m/rad (>= 0).
         element_strength: slip strength W_i, N m (>= 0).
-        width: B_f of the tanh element, N m (>= 0).
-        shape: gamma of the tanh element, 1/rad (>= 0).
+        width: B_f of the tanh element at no load history, N m (>= 0).
+        shape: gamma of the tanh element at no load history, 1/rad (>= 0).
+        width_slope: growth of B_f per N m of load history (>= 0): the tanh
+            element uses ``B_f = width + width_slope * L`` where ``L`` is
+            |transmitted torque| at the last torsion reversal (Seyfferth
+            figs 9b, 15b).
+        shape_slope: change of gamma per N m of load history, 1/(rad N m)
+            (any sign; gamma is held >= 0; Seyfferth figs 9a, 15a).
+        startup_slope: growth of the input side's Coulomb (startup) torque
+            per N m of load history, motor N m per output N m (>= 0;
+            Seyfferth figs 10, 16); switched by ``load_dependent_friction``.
+            The load history is the tanh element's reversal memory, so the
+            three slopes need the ``tanh`` model.
     """
 
     model: str = "maxwell"
@@ -155,6 +166,9 @@ class Hysteresis:
     element_strength: tuple[float, ...] = ()
     width: float = 0.0
     shape: float = 0.0
+    width_slope: float = 0.0
+    shape_slope: float = 0.0
+    startup_slope: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "element_stiffness",
@@ -174,6 +188,14 @@ class Hysteresis:
             require(v >= 0, f"hysteresis.element_strength[{k}]", ">= 0 N m (W)", v)
         require(self.width >= 0, "hysteresis.width", ">= 0 N m", self.width)
         require(self.shape >= 0, "hysteresis.shape", ">= 0 1/rad", self.shape)
+        require(self.width_slope >= 0, "hysteresis.width_slope", ">= 0 N m per N m",
+                self.width_slope)
+        require(self.startup_slope >= 0, "hysteresis.startup_slope", ">= 0 N m per N m",
+                self.startup_slope)
+        for name in ("width_slope", "shape_slope", "startup_slope"):
+            v = getattr(self, name)
+            require(v == 0 or self.model == "tanh", f"hysteresis.{name}",
+                    "0 unless model = 'tanh' (the load history is the tanh element's memory)", v)
 
 
 @dataclass(frozen=True)

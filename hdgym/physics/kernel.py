@@ -81,10 +81,13 @@ from hdgym.physics.layout import (
     SLIP_W,
     ST1,
     ST2,
+    STARTUP1,
     T_LOAD,
     T_MOTOR,
     TANH_B,
+    TANH_B1,
     TANH_G,
+    TANH_G1,
     TH_M,
     TH_O,
     TK,
@@ -316,8 +319,12 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     alpha = 1.0 - math.exp(-2.0 * math.pi * p[BW] * dt)
     locked = (flags & LOCKED) != 0
     nke = int(p[NKE]) if (flags & KE) else 0
-    nslip = int(p[NSLIP]) if (flags & HYST) else 0
-    tanh_model = p[HMODEL] == 1.0 and (flags & HYST) != 0
+    hyst_on = (flags & HYST) != 0
+    # the tanh element's memory runs with hysteresis off too: it holds the load
+    # history the startup torque grows with (docs/physics.md eqs. H3, H4)
+    tanh_model = p[HMODEL] == 1.0
+    nslip = int(p[NSLIP]) if hyst_on and not tanh_model else 0
+    startup = p[STARTUP1] if (tanh_model and (flags & LOADDEP)) else 0.0
     mu = p[MU_LOAD] if (flags & LOADDEP) else 0.0
     amp_on = (flags & AMP) != 0
     imax = p[I_MAX]
@@ -368,17 +375,28 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         t_h = 0.0
         diss = 0.0
         if tanh_model:
+            # Seyfferth eq. 4, load-history parameters: docs/physics.md eqs. H1-H3
             s = x[HZ + 2]
+            load = x[HZ + 4]
+            a_k = abs(t_k)  # |transmitted torque| at the previous substep (= T* at a reversal)
+            if a_k > load:
+                load = a_k
             if abs(d_inc) > REVERSAL_DEADBAND:
                 s_new = 1.0 if d_inc > 0.0 else -1.0
-                if s_new != s:  # reversal: remember where and how much
+                if s_new != s:  # reversal: remember where, how much and the load there
                     x[HZ] = dth - d_inc
                     x[HZ + 1] = x[HZ + 3]
                     x[HZ + 2] = s_new
                     s = s_new
-            dts = x[HZ + 1]
-            t_h = dts + (s * p[TANH_B] - dts) * math.tanh(p[TANH_G] * s * (dth - x[HZ]))
-            x[HZ + 3] = t_h
+                    load = a_k
+            x[HZ + 4] = load
+            if hyst_on:
+                dts = x[HZ + 1]
+                gam = p[TANH_G] + p[TANH_G1] * load
+                gam = gam if gam > 0.0 else 0.0
+                t_h = dts + (s * (p[TANH_B] + p[TANH_B1] * load) - dts) * math.tanh(
+                    gam * s * (dth - x[HZ]))
+                x[HZ + 3] = t_h
         else:
             for k in range(nslip):
                 kap = p[SLIP_K + k]
@@ -410,7 +428,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         cur = cur + alpha * (i_t - cur)
         t_m = kt * cur
         # --- motor side
-        lvl = _level(p, FIN, w_m, 0.0, flags, trig, _RIP0[0], nrip_in)
+        lvl = _level(p, FIN, w_m, startup * x[HZ + 4], flags, trig, _RIP0[0], nrip_in)  # eq. H4
         vis = _visc(vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk, w_m)
         w_m_new, pm = _advance(w_m, t_m - t_k * gear, h_m, vis, lvl)
         # --- output side

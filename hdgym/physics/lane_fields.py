@@ -81,9 +81,13 @@ ST1 = _rows()
 ST2 = _rows()
 SK2 = _rows()
 SK3 = _rows()
-TANH = _rows()  # 1 for the tanh hysteresis model
+TANH = _rows()  # 1 for the tanh hysteresis model (its memory runs with hysteresis off too)
+TANH_ON = _rows()  # 1 when the tanh element's torque is on (hysteresis effect)
 TANH_B = _rows()
 TANH_G = _rows()
+TANH_B1 = _rows()  # width growth per N m of load history
+TANH_G1 = _rows()  # shape change per N m of load history
+STARTUP = _rows()  # input Coulomb growth per N m of load history (0 unless tanh + load friction)
 NKE = _rows()
 NSLIP = _rows()  # Maxwell-slip elements in use (0 with the tanh model)
 NRIP_IN = _rows()
@@ -178,10 +182,14 @@ def prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) ->
     put(w, SK2, j, p[L.SK2])
     put(w, SK3, j, p[L.SK3])
     hyst = (flags & HYST) != 0
-    tanh_model = hyst and p[L.HMODEL] == 1.0
+    tanh_model = p[L.HMODEL] == 1.0
     put(w, TANH, j, 1.0 if tanh_model else 0.0)
+    put(w, TANH_ON, j, 1.0 if (tanh_model and hyst) else 0.0)
     put(w, TANH_B, j, p[L.TANH_B])
     put(w, TANH_G, j, p[L.TANH_G])
+    put(w, TANH_B1, j, p[L.TANH_B1])
+    put(w, TANH_G1, j, p[L.TANH_G1])
+    put(w, STARTUP, j, p[L.STARTUP1] if (tanh_model and (flags & LOADDEP)) else 0.0)
     nslip = int(p[L.NSLIP]) if (hyst and not tanh_model) else 0
     put(w, NSLIP, j, nslip)
     for k in range(MAX_SLIP_ELEMENTS):

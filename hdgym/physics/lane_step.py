@@ -75,6 +75,7 @@ from hdgym.physics.lane_fields import (
     SLIP_WK,
     ST1,
     ST2,
+    STARTUP,
     T_D,
     T_DDTH,
     T_DINC,
@@ -90,7 +91,10 @@ from hdgym.physics.lane_fields import (
     T_TH,
     TANH,
     TANH_B,
+    TANH_B1,
     TANH_G,
+    TANH_G1,
+    TANH_ON,
     TEXT,
     TH1,
     TH2,
@@ -210,19 +214,27 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
     for j in range(nl):
         if _g(w, TANH, j) == 0.0:
             continue
+        # Seyfferth eq. 4, load-history parameters: docs/physics.md eqs. H1-H3
         dth = _g(w, T_DTH, j)
         d_inc = _g(w, T_DINC, j)
         s = _g(w, hz + 2, j)
+        a_k = abs(_g(w, L.TK, j))  # the previous substep's transmitted torque
+        load = max(_g(w, hz + 4, j), a_k)
         if abs(d_inc) > REVERSAL_DEADBAND:
             s_new = 1.0 if d_inc > 0.0 else -1.0
-            if s_new != s:  # reversal: remember where and how much
+            if s_new != s:  # reversal: remember where, how much and the load there
                 _s(w, hz, j, dth - d_inc)
                 _s(w, hz + 1, j, _g(w, hz + 3, j))
                 _s(w, hz + 2, j, s_new)
                 s = s_new
+                load = a_k
+        _s(w, hz + 4, j, load)
+        if _g(w, TANH_ON, j) == 0.0:
+            continue
         dts = _g(w, hz + 1, j)
-        t_h = dts + (s * _g(w, TANH_B, j) - dts) * math.tanh(
-            _g(w, TANH_G, j) * s * (dth - _g(w, hz, j)))
+        gam = max(_g(w, TANH_G, j) + _g(w, TANH_G1, j) * load, 0.0)
+        t_h = dts + (s * (_g(w, TANH_B, j) + _g(w, TANH_B1, j) * load) - dts) * math.tanh(
+            gam * s * (dth - _g(w, hz, j)))
         _s(w, hz + 3, j, t_h)
         _s(w, T_TH, j, t_h)
 
@@ -346,7 +358,8 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         t_m = _g(w, KT, j) * cur
         _s(w, L.T_MOTOR, j, t_m)
         # --- motor side
-        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
+        # startup torque grown with the load history, docs/physics.md eq. H4
+        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + _g(w, STARTUP, j) * _g(w, L.HZ + 4, j)
         lvl = lvl if lvl > 0.0 else 0.0
         w_m_new, pm = _advance(w_m, t_m - t_k * _g(w, T_GEAR, j), _g(w, H_M, j),
                                _visc(w, a_in, j, w_m), lvl)

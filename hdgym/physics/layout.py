@@ -26,7 +26,7 @@ W_MOTOR = 8  # work done by the motor torque, J
 W_LOAD = 9  # work done on the joint by the external load, J
 T_LOAD = 10  # external load torque last applied, N m (resists positive motion)
 T_MOTOR = 11  # motor torque last applied, N m
-HZ = 12  # hysteresis memory: Maxwell-slip forces, or tanh (phi*, dT*, s, T_h)
+HZ = 12  # hysteresis memory: Maxwell-slip forces, or tanh (phi*, dT*, s, T_h, load history L)
 N_STATE = HZ + MAX_SLIP_ELEMENTS
 
 STATE_NAMES = (
@@ -69,6 +69,9 @@ SLIP_K = _col("hysteresis.element_stiffness", MAX_SLIP_ELEMENTS)
 SLIP_W = _col("hysteresis.element_strength", MAX_SLIP_ELEMENTS)
 TANH_B = _col("hysteresis.width")
 TANH_G = _col("hysteresis.shape")
+TANH_B1 = _col("hysteresis.width_slope")
+TANH_G1 = _col("hysteresis.shape_slope")
+STARTUP1 = _col("hysteresis.startup_slope")
 MU_LOAD = _col("friction.load_coefficient")
 NKE = _col("kinematic_error.n_harmonics")
 KE_ORD = _col("kinematic_error.order", MAX_HARMONICS)  # effective order of the WG angle
@@ -154,6 +157,9 @@ def pack(p: JointParams) -> np.ndarray:
         row[SLIP_W + k] = w
     row[TANH_B] = h.width
     row[TANH_G] = h.shape
+    row[TANH_B1] = h.width_slope
+    row[TANH_G1] = h.shape_slope
+    row[STARTUP1] = h.startup_slope
     row[MU_LOAD] = p.friction.load_coefficient
     _pack_side(row, FIN, p.friction.input)
     _pack_side(row, FOUT, p.friction.output)

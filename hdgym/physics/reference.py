@@ -127,7 +127,8 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     d_inc = dth - x[:, L.DTH]
     x[:, L.DTH] = dth
     hyst = _on(flags, "hysteresis")
-    tanh_model = hyst & (p[:, L.HMODEL] == 1.0)
+    tanh_memory = p[:, L.HMODEL] == 1.0  # kept with hysteresis off: the load history
+    tanh_model = hyst & tanh_memory
     # Maxwell-slip
     t_h = np.zeros(len(x))
     diss = np.zeros(len(x))
@@ -142,16 +143,21 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
         x[:, L.HZ + k] = np.where(use, fc, x[:, L.HZ + k])
         t_h += np.where(use, fc, 0.0)
         diss += np.where(use, slip, 0.0)
-    # tanh element with last-reversal memory
+    # tanh element, last-reversal memory, load history: docs/physics.md eqs. H1-H3
     s = x[:, L.HZ + 2]
     s_new = np.where(d_inc > REVERSAL_DEADBAND, 1.0, np.where(d_inc < -REVERSAL_DEADBAND, -1.0, s))
-    rev = tanh_model & (s_new != s)
+    rev = tanh_memory & (s_new != s)
+    a_k = np.abs(x[:, L.TK])  # transmitted torque of the previous substep
+    load = np.where(rev, a_k, np.maximum(x[:, L.HZ + 4], a_k))
+    x[:, L.HZ + 4] = np.where(tanh_memory, load, x[:, L.HZ + 4])
     x[:, L.HZ] = np.where(rev, dth - d_inc, x[:, L.HZ])
     x[:, L.HZ + 1] = np.where(rev, x[:, L.HZ + 3], x[:, L.HZ + 1])
     x[:, L.HZ + 2] = np.where(rev, s_new, s)
     s = x[:, L.HZ + 2]
     dts = x[:, L.HZ + 1]
-    th_tanh = dts + (s * p[:, L.TANH_B] - dts) * np.tanh(p[:, L.TANH_G] * s * (dth - x[:, L.HZ]))
+    width = p[:, L.TANH_B] + p[:, L.TANH_B1] * load
+    gam = np.maximum(p[:, L.TANH_G] + p[:, L.TANH_G1] * load, 0.0)
+    th_tanh = dts + (s * width - dts) * np.tanh(gam * s * (dth - x[:, L.HZ]))
     x[:, L.HZ + 3] = np.where(tanh_model, th_tanh, x[:, L.HZ + 3])
     t_h = np.where(tanh_model, th_tanh, t_h)
     t_k = spring(dth, p, flags) + p[:, L.CDAMP] * ddth + t_h
@@ -167,8 +173,9 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.CUR] = cur
     t_m = p[:, L.KT] * cur
     x[:, L.T_MOTOR] = t_m
-    zero = np.zeros(len(x))
-    lvl = _level(p, L.FIN, w_m, th_m, th_o, zero, flags)
+    startup = np.where(tanh_memory & _on(flags, "load_dependent_friction"),  # eq. H4
+                       p[:, L.STARTUP1] * x[:, L.HZ + 4], 0.0)
+    lvl = _level(p, L.FIN, w_m, th_m, th_o, startup, flags)
     w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], _visc(p, L.FIN, w_m, flags), lvl,
                            dt)
     t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext
