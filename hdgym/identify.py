@@ -19,16 +19,31 @@ with the non-negative linear parameters solved inside by
 
 :func:`nmse` is seed 002's fit measure, ``NMSE% = 100/(n sigma^2) sum (y_hat - y)^2``
 with ``sigma`` the standard deviation of the measured ``y``.
+
+Identifiability (what a fit can and cannot tell from a record made by
+another model): a Maxwell-slip model obeys Masing's rules, so all its loops
+follow from one function, the *virgin curve* ``T_v(x) = spring(x) + sum_i
+kappa_i clip(x, -Delta_i, Delta_i)`` (loading from the relaxed state). A
+record determines ``T_v`` only over the torsion it excited, ``|x| <=
+x_max``: elements with ``Delta_i > x_max`` never slip and are
+indistinguishable from the spring, and many element sets give the same
+``T_v`` there. :func:`virgin_curve_error` compares a fit's virgin curve with
+a truth's inside and beyond the excited range, :func:`cycle_energy` the
+energy a loop dissipates (for truths that are not Maxwell-slip, such as
+Seyfferth's tanh element whose width grows with the cycle's peak load).
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
 from scipy.optimize import least_squares, nnls
+
+from hdgym.params import JointParams
 
 
 def nmse(y_hat: np.ndarray, y: np.ndarray) -> float:
@@ -130,6 +145,44 @@ class MaxwellSlipFit:
                 out = out + k * stop_operator(x, w / k)
         return out
 
+    def virgin_curve(self, x: np.ndarray) -> np.ndarray:
+        """Torque when loading monotonically from the relaxed state to torsion ``x``, N m."""
+        x = np.asarray(x, dtype=float)
+        out = self.spring(x)
+        for k, w in zip(self.kappa, self.strength, strict=True):
+            if k > 0:
+                out = out + k * np.clip(x, -w / k, w / k)
+        return out
+
+    def reversal_stiffness(self, resolution: float = 0.0) -> float:
+        """Tangent stiffness just after a reversal, N m/rad: the spring's inner slope plus
+        every element whose slip threshold exceeds ``resolution`` rad (elements that slip
+        within one resolution step act as friction, not stiffness)."""
+        return self.k1 + sum(k for k, d in zip(self.kappa, self.thresholds, strict=True)
+                             if d > resolution)
+
+    def saturated_strength(self, x_max: float) -> float:
+        """Sum of the slip strengths of the elements that slip below torsion ``x_max``, N m
+        (the half-height the hysteresis reaches in loops of amplitude ``x_max``)."""
+        return sum(w for w, d in zip(self.strength, self.thresholds, strict=True) if d <= x_max)
+
+    @classmethod
+    def from_params(cls, p: JointParams) -> MaxwellSlipFit:
+        """The torsion model of a preset with a linear or two-segment spring and Maxwell-slip
+        hysteresis (a truth to compare fits with); ``nmse`` is NaN.
+
+        Raises:
+            ValueError: for another spring or hysteresis model.
+        """
+        c, h = p.compliance, p.hysteresis
+        if c.model not in ("linear", "two_segment") or h.model != "maxwell":
+            raise ValueError(f"from_params: {p.name} has a {c.model} spring and {h.model} "
+                             "hysteresis; only linear/two_segment + maxwell map to this model")
+        two = c.model == "two_segment"
+        return cls(k1=c.stiffness, k0=c.extra_stiffness if two else 0.0,
+                   theta0=c.knee if two else 0.0, kappa=tuple(h.element_stiffness),
+                   strength=tuple(h.element_strength), nmse=math.nan)
+
     def as_params(self) -> dict[str, object]:
         """Keyword arguments for :class:`hdgym.params.Compliance` and ``Hysteresis``."""
         return {
@@ -222,3 +275,44 @@ def fit_maxwell_slip(torsion: np.ndarray, torque: np.ndarray, n_elements: int = 
         strength=tuple(float(kappa[i] * deltas[i]) for i in order),
         nmse=nmse(r + y, y),
     )
+
+
+def virgin_curve_error(fit: MaxwellSlipFit, truth: MaxwellSlipFit, x_max: float,
+                       n: int = 201) -> tuple[float, float]:
+    """Largest virgin-curve difference inside and beyond the excited torsion range.
+
+    Args:
+        fit: the identified model.
+        truth: the model that made the record.
+        x_max: largest |torsion| of the training record, rad.
+        n: grid points per range.
+
+    Returns:
+        ``(inside, beyond)``: max |T_fit - T_truth| over ``0 <= x <= x_max`` and over
+        ``x_max <= x <= 2 x_max``, each in percent of the truth's torque at ``x_max``.
+    """
+    if not x_max > 0:
+        raise ValueError(f"virgin_curve_error: x_max must be > 0 rad, got {x_max!r}")
+    ref = abs(float(truth.virgin_curve(np.array([x_max]))[0]))
+    if not ref > 0:
+        raise ValueError("virgin_curve_error: the truth carries no torque at x_max")
+    out = []
+    for lo, hi in ((0.0, x_max), (x_max, 2.0 * x_max)):
+        x = np.linspace(lo, hi, n)
+        out.append(100.0 * float(np.max(np.abs(fit.virgin_curve(x) - truth.virgin_curve(x)))) / ref)
+    return out[0], out[1]
+
+
+def cycle_energy(torsion: np.ndarray, torque: np.ndarray) -> float:
+    """Energy a closed torque/torsion loop dissipates, ``|closed integral of T dx|``, J.
+
+    The samples should span whole cycles; the loop is closed from the last
+    sample back to the first.
+    """
+    x = np.asarray(torsion, dtype=float)
+    y = np.asarray(torque, dtype=float)
+    if x.shape != y.shape or x.ndim != 1 or x.size < 3:
+        raise ValueError("cycle_energy: torsion and torque must be 1-D of equal length >= 3")
+    xc = np.append(x, x[0])
+    yc = np.append(y, y[0])
+    return float(abs(np.sum(0.5 * (yc[1:] + yc[:-1]) * np.diff(xc))))

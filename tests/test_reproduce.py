@@ -183,7 +183,7 @@ def test_ke_spectrum_of_presets(tmp_path) -> None:
 
 def test_resonance_loop_and_identification(tmp_path) -> None:
     """(c), (d), (e) quick runs pass."""
-    for check in (tuttle.check_resonance, tuttle.check_loop, seyfferth.check_identification):
+    for check in (tuttle.check_resonance, tuttle.check_loop, seyfferth.check_maxwell_slip):
         item = check(tmp_path, quick=True)
         assert item.passed, item.measured
 

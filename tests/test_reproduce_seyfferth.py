@@ -1,0 +1,89 @@
+"""Seyfferth & Angeles (1995) items of ``hdgym reproduce seyfferth``: the measurement itself,
+then the paper's numbers on the presets (coarser frequency grids than the page)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hdgym.params import preset
+from hdgym.reproduce import seyfferth as S
+
+
+def test_fit_second_order_recovers_eq14():
+    kj = 281.25
+    f = np.arange(0.5, 6.0, 0.1)
+    g = S.SecondOrder(0.32, 24.5, kj).gain(f)
+    fit = S.fit_second_order(f, g, kj)
+    assert fit.zeta == pytest.approx(0.32, rel=1e-6)
+    assert fit.omega_n == pytest.approx(24.5, rel=1e-6)
+    with pytest.raises(ValueError, match="resonance region"):
+        S.fit_second_order(f[:2], g[:2], kj)
+
+
+def test_gain_curve_of_a_linear_joint_is_eq14():
+    """With only a linear spring and viscous input friction the locked joint *is* eq. 14:
+    omega_n^2 = c1 / (N^2 J1), 2 zeta omega_n = b1 / J1."""
+    p = (preset("seyfferth-rh32").without("kinematic_error", "nonlinear_stiffness",
+                                          "hysteresis", "coulomb_friction", "stribeck_friction",
+                                          "stiction", "position_dependent_friction",
+                                          "load_dependent_friction", "amplifier_saturation")
+         .set("friction.input.cubic", 0.0).set("friction.input.viscous", 0.004))
+    j1, n = p.motor.inertia, p.ratio
+    wn = np.sqrt(p.compliance.stiffness / (n * n * j1))
+    zeta = 0.004 / (2 * j1 * wn)
+    f = np.array([1.0, 2.0, 2.4, 3.0, 4.0])
+    g, stuck = S.gain_curve(p, 1.0, f, cycles=30, settle=6.0)
+    expect = S.SecondOrder(zeta, wn, p.motor.torque_constant / j1).gain(f)
+    np.testing.assert_allclose(g, expect, rtol=0.02)
+    assert np.all(stuck == 0)
+
+
+def _fit(name, amp, lo, hi):
+    p = preset(name)
+    f = np.arange(lo, hi + 1e-9, 0.25)
+    g, _ = S.gain_curve(p, amp, f)
+    return S.fit_second_order(f, g, p.motor.torque_constant / p.motor.inertia), f, g
+
+
+@pytest.mark.parametrize("amp", sorted(S.EQ14))
+def test_rh32_eq14(amp):
+    z_p, w_p = S.EQ14[amp]
+    fit, _, _ = _fit("seyfferth-rh32", amp, 1.0, 6.0)
+    assert abs(fit.zeta / z_p - 1) <= S.ZETA_TOL, fit
+    assert abs(fit.omega_n / w_p - 1) <= S.OMEGA_TOL, fit
+
+
+@pytest.mark.xfail(strict=True, reason="held-out check fails: the eq.-14-tuned RH-32 stops at "
+                   "0.885 rad; a first loading dissipates only through the startup torque")
+def test_rh32_step_fig22(tmp_path):
+    item = S.check_step(tmp_path, quick=True)
+    assert item.passed, item.measured
+
+
+def test_rh25_fig18():
+    peaks, fres = [], []
+    for amp in S.RH25_AMPS:
+        _, f, g = _fit("seyfferth-rh25", amp, 0.5, 10.0)
+        peaks.append(g.max())
+        fres.append(f[np.argmax(g)])
+    assert max(peaks) <= S.FIG18_MAX_GAIN, peaks
+    assert all(abs(fr / S.FIG18_F_RES - 1) <= 0.15 for fr in fres), fres
+    assert fres[-1] <= fres[0], fres
+    assert np.all(np.diff(peaks) > 0), peaks
+
+
+@pytest.mark.xfail(strict=True, reason="held-out check fails: the Fig.-18-tuned RH-25 still "
+                   "sticks 18 % of the cycle at 3 Hz and 1 % at 4 Hz")
+def test_rh25_stick_slip_below_2_5_hz():
+    p = preset("seyfferth-rh25")
+    _, stuck_lo = S.gain_curve(p, 1.0, np.array([1.0, 2.0]))
+    _, stuck_hi = S.gain_curve(p, 1.0, np.array([3.0, 4.0]))
+    assert np.all(stuck_lo > 0), stuck_lo
+    assert np.all(stuck_hi == 0), stuck_hi
+
+
+def test_rh25_ablation_hysteresis_damps_most(tmp_path):
+    item = S.check_ablation(tmp_path, quick=True)
+    assert item.passed, item.measured
+    assert (tmp_path / "seyfferth_rh25_ablation.png").exists()
