@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from hdgym.discrepancy import cases, experiments, realdata
-from hdgym.discrepancy.effect import Scales
 from hdgym.discrepancy.command import diagnose_files
+from hdgym.discrepancy.effect import Scales
 from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.discrepancy.registry import REGISTRY, model_params
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
@@ -262,6 +262,47 @@ def test_nothing_hidden_reports_nothing():
     r = _run(cases.Case("none", (), "current_steps"))
     assert r.found == [], r.diagnosis.conclusion
     assert "nothing" in r.diagnosis.conclusion
+    assert r.diagnosis.outcome == "nothing missing"
+    assert r.diagnosis.horizon in (0.5, 0.2, 0.1, 0.05, 0.025)
+
+
+def test_effects_say_where_they_can_be_seen():
+    """A locked-output record cannot show kinematic error or position-dependent friction."""
+    from hdgym.discrepancy.problem import Problem
+
+    truth = cases.truth_for(cases.Case("h", ("hysteresis",), "locked_random"))
+    rec = experiments.generate("locked_random", truth, duration=1.0, seed=1)
+    s = Problem(rec, truth).scales
+    assert s.locked and s.reversals >= 2 and s.torsion_measured
+    assert "free output" in REGISTRY["kinematic_error"].why_not(s)
+    assert "free output" in REGISTRY["position_dependent_friction"].why_not(s)
+    assert REGISTRY["hysteresis"].why_not(s) is None
+    # a constant-speed run in one direction has no reversal and no standstill
+    free = experiments.generate("slow_constant_speed", truth.with_effects("kinematic_error"),
+                                duration=1.0, seed=1)
+    f = Problem(free, truth).scales
+    assert f.reversals == 0 and f.standstills == 0 and not f.locked
+    assert "standstill" in REGISTRY["stiction"].why_not(f)
+    assert REGISTRY["stiction"].protocol == "breakaway_ramps"
+    for e in REGISTRY.values():
+        assert e.seen and e.protocol in experiments.PROTOCOLS and e.channels
+
+
+def test_three_outcomes_and_the_next_experiment():
+    from hdgym.discrepancy.workflow import RESOLVED, _outcome
+
+    base = cases.case_joint()
+    why = {"kinematic_error": "needs a free output"}
+    cands = [{"name": "stiction"}, {"name": "stribeck_friction"}]
+    out, nxt = _outcome([], 0.5 * RESOLVED, 0.001, cands, why, base)
+    assert out == "nothing missing" and nxt == ["hdgym experiment slow_constant_speed"]
+    out, nxt = _outcome([], 10.0, 0.001, cands, why, base)
+    assert out == "unexplained"
+    assert nxt == ["hdgym experiment breakaway_ramps", "hdgym experiment current_sine",
+                   "hdgym experiment slow_constant_speed"]
+    # a residual within the noise is nothing missing even above RESOLVED
+    assert _outcome([], 2.0, 1.0, cands, {}, base)[0] == "nothing missing"
+    assert _outcome(["step"], 10.0, 0.001, cands, {}, base)[0] == "named"
 
 
 @pytest.mark.slow
@@ -379,15 +420,90 @@ def test_failed_report_leaves_previous_report_alone(tmp_path, monkeypatch):
 # ---------------------------------------------------------------- real data
 
 
-@pytest.mark.skipif(not REAL.exists(), reason="real data not present")
 def test_real_sweep_loads_as_an_si_record():
-    from hdgym.discrepancy.realdata import load_friction_sweep
-
     path = sorted(REAL.glob("friction_sweep_*.csv"))[0]
-    rec = load_friction_sweep(path)
+    sw = realdata.read_sweep(path)
+    rec = sw.record
     assert rec.meta["licence"] == "MIT" and "harivin" in rec.meta["source"]
+    assert (REAL / "LICENSE").exists() and (REAL / "ORIGIN.md").exists()
     assert rec.ratio == 50.0
     np.testing.assert_allclose(rec.motor_angle, 50 * rec.output_angle)
     assert np.ptp(rec.output_angle) == pytest.approx(math.radians(160), rel=0.1)
     assert 4e-3 < rec.dt < 6e-3
-    assert 4.5 < float(rec.meta["torque_constant_output"]) < 5.5
+    assert 4.5 < sw.torque_constant < 5.5
+    # named relative to the repository, never by an absolute path
+    assert not Path(rec.source).is_absolute() and rec.source.startswith("hdgym/")
+
+
+def test_real_sweep_legs_faults_and_labels():
+    sw = realdata.read_sweep(sorted(REAL.glob("friction_sweep_*.csv"))[0])
+    assert [g.number for g in sw.legs] == [1, 2, 3, 4]  # the one-row end marker is no leg
+    assert sw.fault_rows == 33 and [f.code for f in sw.faults] == [102]
+    labels = [c[0] for c in sw.cycles()]
+    assert labels[0].startswith("legs 1-2") and labels[1].startswith("legs 3-4")
+    # every fault-flagged sample is left out of the comparison
+    from hdgym.discrepancy.problem import excluded_samples
+
+    ex = excluded_samples(sw.record)
+    t = np.asarray(sw.record.time)
+    for f in sw.faults:
+        for tf in f.times:
+            assert ex[np.argmin(np.abs(t - tf))]
+    assert 0 < ex.mean() < 0.05
+    # a cycle is the pair of legs it names
+    rec = sw.part(*sw.cycles()[1])
+    assert rec.time[0] == pytest.approx(sw.legs[2].t0, abs=0.01)
+    assert rec.time[-1] == pytest.approx(sw.legs[3].t1, abs=0.01)
+
+
+def test_sweep_files_take_files_and_folders(tmp_path):
+    files = realdata.sweep_files([REAL])
+    assert files == sorted(REAL.glob("friction_sweep_*.csv"))
+    src = files[0]
+    for name in ("friction_sweep_a.csv", "friction_sweep_b.csv"):
+        (tmp_path / name).write_bytes(src.read_bytes())
+    assert [f.name for f in realdata.sweep_files([tmp_path])] == ["friction_sweep_a.csv",
+                                                                  "friction_sweep_b.csv"]
+    assert realdata.sweep_files([tmp_path / "friction_sweep_b.csv"])[0].name.endswith("b.csv")
+    with pytest.raises(ValueError, match="no such file"):
+        realdata.sweep_files([tmp_path / "missing.csv"])
+    with pytest.raises(ValueError, match="no friction_sweep"):
+        realdata.sweep_files([_empty(tmp_path)])
+
+
+def _empty(tmp_path: Path) -> Path:
+    d = tmp_path / "empty"
+    d.mkdir()
+    return d
+
+
+@pytest.fixture(scope="module")
+def real_result():
+    sw = realdata.read_sweep(sorted(REAL.glob("friction_sweep_*.csv"))[0])
+    return realdata.diagnose_sweep(sw, quick=True)
+
+
+def test_real_sweep_names_position_dependent_friction(real_result):
+    d = real_result.diagnosis
+    assert d.missing_effects[:1] == ["position_dependent_friction"]
+    assert d.outcome == "named"
+    assert real_result.train.startswith("legs 1-2") and real_result.validate.startswith("legs 3-4")
+    amps = {r.order: r.amplitude for r in d.after.params.friction.output.ripple}
+    assert 1.0 < amps[1.0] < 1.8 and 0.5 < amps[2.0] < 1.2
+    notes = " ".join(realdata.notes(real_result))
+    assert "code 102: 33 rows" in notes and "angle reference" in notes
+    assert "4.1-4.4" not in notes  # no fixed text: every number is computed
+
+
+def test_cross_record_re_estimates_only_the_rotor_zero(real_result):
+    """A run logged from another start angle: the carried-over ripple needs its rotor zero."""
+    rows = realdata.cross_record([real_result])
+    (row,) = rows
+    assert row["validate"].startswith("stand-in run")
+    # the re-estimated zero is the one the stand-in was made with, to a few degrees
+    err = (row["rotor_zero_deg"] - row["known_zero_deg"] + 180) % 360 - 180
+    assert abs(err) < 5
+    assert row["rezeroed"] < row["as_fitted"] < row["base"] * 1.01
+    assert row["recovered_rezeroed"] > 0.8
+
+

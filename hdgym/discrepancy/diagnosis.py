@@ -52,6 +52,16 @@ class Diagnosis:
     fit_window: float | None = None
     nmse_record_before: dict[str, float] | None = None
     nmse_record_after: dict[str, float] | None = None
+    outcome: str = ""
+    horizon: float | None = None
+    """Prediction horizon, s (multiple-shooting segment; None: inverse comparison)."""
+    """``nothing missing``, ``named`` or ``unexplained`` (see :mod:`.workflow`)."""
+    noise: dict[str, float] | None = None
+    """Measurement-noise NMSE per channel of the record the outcome is judged on."""
+    untestable_why: dict[str, str] = field(default_factory=dict)
+    """Effect -> what the record would have to show for it to be seen."""
+    next_experiments: list[str] = field(default_factory=list)
+    """``hdgym experiment ...`` commands whose records would decide what this one cannot."""
 
     @property
     def missing_effects(self) -> list[str]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,6 +38,21 @@ class Scales:
             pauses and runs (:func:`.residuals.friction_levels`; side ``output``,
             ``input`` or ``lumped``, N m in the side's frame): the largest torque
             held while stuck and the sign-of-velocity level while moving.
+        moving: share of the samples in which the motor (WG) moves faster than 10 %
+            of its 90th-percentile speed.
+        reversals: how often the motor speed changes sign while moving.
+        standstills: pauses in which the measured joint stands still (no encoder
+            count for :data:`.restarts.REST_PAUSE`), each a breakaway to come.
+        wg_turns: WG revolutions the record spans.
+        speed_spread: 90th over 10th percentile of the moving speed.
+        torsion_measured: the record shows the torsion (locked output, a torque sensor,
+            or a transmission error above the output encoder's resolution).
+        te_measured: the transmission error is a compared channel.
+        torque_share: largest transmitted torque over the drive's peak torque (torque
+            constant x ratio x the model's current limit, or the largest command).
+        moving_torque_share: the same, 90th percentile over the moving samples.
+
+    The defaults of the record facts (``moving`` on) say "the record shows everything".
     """
 
     torque: float
@@ -51,6 +67,47 @@ class Scales:
     ke: tuple[tuple[float, str, float, float], ...] = ()
     ripple: tuple[tuple[float, float, float], ...] = ()
     static: tuple[tuple[str, float, float], ...] = ()
+    moving: float = 1.0
+    reversals: int = 2
+    standstills: int = 1
+    wg_turns: float = math.inf
+    speed_spread: float = math.inf
+    torsion_measured: bool = True
+    te_measured: bool = True
+    torque_share: float = 1.0
+    moving_torque_share: float = 1.0
+
+
+@dataclass(frozen=True)
+class Condition:
+    """What a record must show for an effect to be seen: ``needs`` (words) and the check."""
+
+    needs: str
+    check: Callable[[Scales], bool] = field(repr=False)
+
+
+FREE = Condition("a free output (this record's output is locked)", lambda s: not s.locked)
+SIMULATED = Condition("a current command to re-simulate (this is a closed-loop record, compared "
+                      "in the torque domain)", lambda s: not s.inverse)
+MOVING = Condition("motion (the joint moves in at least 20 % of the record)",
+                   lambda s: s.moving >= 0.2)
+TURNS = Condition("at least two WG revolutions of motion", lambda s: s.wg_turns >= 2.0)
+TE = Condition("a transmission error above the output encoder's resolution",
+               lambda s: s.te_measured)
+TORSION = Condition("the torsion (a locked output, a torque sensor or the transmission error)",
+                    lambda s: s.torsion_measured)
+HIGH_TORQUE = Condition("torque beyond half the drive's peak torque (a hardening spring shows "
+                        "at high torsion)", lambda s: s.torque_share >= 0.5)
+REVERSALS = Condition("reversals (the motion changes direction at least twice)",
+                      lambda s: s.reversals >= 2)
+STANDSTILL = Condition("standstill and breakaway (the joint stops for 30 ms or more and starts "
+                       "again)", lambda s: s.standstills >= 1)
+LOW_SPEED = Condition("motion through low speed (a reversal or a start from rest)",
+                      lambda s: s.reversals + s.standstills >= 1)
+SPEED_BAND = Condition("a band of speeds (90th over 10th percentile of the moving speed >= 1.5)",
+                       lambda s: s.speed_spread >= 1.5)
+LOADED = Condition("transmitted torque while moving beyond a fifth of the drive's peak torque",
+                   lambda s: s.moving_torque_share >= 0.2)
 
 
 @dataclass(frozen=True)
@@ -72,7 +129,12 @@ class Effect:
         signature: key of its signature function in ``residuals.SIGNATURES``.
         description: one line for reports.
         requires: effects that must be on for this one to act.
-        testable: ``testable(scales)`` -> whether the record can show it at all.
+        seen: the conditions under which a record reveals it (:class:`Condition`); the
+            workflow compares the effect only on records that meet them all and lists
+            it as untestable otherwise (:meth:`why_not`).
+        channels: the comparison channels that show it.
+        protocol: the identification protocol (``hdgym experiment NAME``) whose record
+            reveals it: the next experiment when this record cannot.
         sized: ``sized(scales)`` -> whether :meth:`switch_on` reads its size
             parameters (those with lower bound 0) from the record; the trial start
             then searches near them instead of over their whole range.
@@ -85,8 +147,19 @@ class Effect:
     _on: Callable[[JointParams, Scales], dict[str, Any]] = field(repr=False)
     _neutral: Callable[[dict[str, Any]], None] = field(repr=False)
     requires: tuple[str, ...] = ()
-    testable: Callable[[Scales], bool] = field(default=lambda s: True, repr=False)
+    seen: tuple[Condition, ...] = ()
+    channels: str = ""
+    protocol: str = ""
     sized: Callable[[Scales], bool] = field(default=lambda s: False, repr=False)
+
+    def why_not(self, s: Scales) -> str | None:
+        """Why a record with scales ``s`` cannot reveal this effect (None: it can)."""
+        missing = [c.needs for c in self.seen if not c.check(s)]
+        return "needs " + "; ".join(missing) if missing else None
+
+    def testable(self, s: Scales) -> bool:
+        """Whether a record with scales ``s`` can reveal this effect."""
+        return self.why_not(s) is None
 
     def fit_params(self, p: JointParams, s: Scales) -> list[FitParam]:
         """Parameters to fit for this effect, with bounds (containing the current value)."""
@@ -118,18 +191,3 @@ class Effect:
         self._neutral(d)
         fix_sides(d)
         return from_dict(d, "params")
-
-
-def free_output(s: Scales) -> bool:
-    """The output moves (not a locked-output record)."""
-    return not s.locked
-
-
-def simulated(s: Scales) -> bool:
-    """The comparison re-simulates the record (not the inverse-dynamics one)."""
-    return not s.inverse
-
-
-def free_simulated(s: Scales) -> bool:
-    """Free output and a simulated comparison."""
-    return not s.locked and not s.inverse

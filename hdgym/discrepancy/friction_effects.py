@@ -12,7 +12,19 @@ from typing import Any
 
 from hdgym.params import JointParams
 
-from .effect import Effect, FitParam, Scales, free_output, simulated
+from .effect import (
+    FREE,
+    LOADED,
+    LOW_SPEED,
+    MOVING,
+    SIMULATED,
+    SPEED_BAND,
+    STANDSTILL,
+    TURNS,
+    Effect,
+    FitParam,
+    Scales,
+)
 
 RIPPLE_ORDERS = (1.0, 2.0)
 
@@ -212,25 +224,33 @@ def _load_neutral(d):
 FRICTION_EFFECTS: tuple[Effect, ...] = (
     Effect("coulomb_friction", "sign_steps",
            "Coulomb friction: residual steps with the sign of the velocity",
-           _coul_params, _coul_on, _coul_neutral),
+           _coul_params, _coul_on, _coul_neutral, seen=(MOVING,),
+           channels="speed (or current) steps with the direction of motion",
+           protocol="current_steps"),
     Effect("viscous_friction", "speed_bins",
            "viscous friction: residual grows with speed",
-           _visc_params, _visc_on, _visc_neutral),
+           _visc_params, _visc_on, _visc_neutral, seen=(MOVING, SPEED_BAND),
+           channels="speed (or current) across a band of speeds", protocol="current_steps"),
     Effect("stribeck_friction", "speed_bins_low",
            "Stribeck friction: extra friction that decays with speed",
            _strib_params, _strib_on, _break_neutral, requires=("coulomb_friction",),
-           sized=_static_sized),
+           sized=_static_sized, seen=(MOVING, LOW_SPEED),
+           channels="speed (or current) near zero speed", protocol="current_sine"),
     Effect("stiction", "breakaway",
            "stiction: breakaway torque above the running friction",
            _stick_params, _stick_on, _break_neutral, requires=("coulomb_friction",),
-           testable=simulated, sized=_static_sized),
+           sized=_static_sized, seen=(SIMULATED, MOVING, STANDSTILL),
+           channels="breakaway events: held torque and the speed after each start",
+           protocol="breakaway_ramps"),
     Effect("position_dependent_friction", "order_lines_speed",
            "position-dependent friction: friction ripple at orders of the WG angle",
            _posdep_params, _posdep_on, _posdep_neutral, requires=("coulomb_friction",),
-           testable=free_output),
+           seen=(FREE, MOVING, TURNS), channels="speed (or current) lines at orders of the WG "
+           "angle", protocol="slow_constant_speed"),
     Effect("load_dependent_friction", "torque_dependence",
            "load-dependent tooth friction: friction grows with the transmitted torque",
            _load_params, _load_on, _load_neutral, requires=("coulomb_friction",),
-           testable=free_output),
+           seen=(FREE, MOVING, LOADED), channels="speed (or current) against transmitted torque",
+           protocol="loaded_current_steps"),
 )
 """The friction effects, in vocabulary order."""

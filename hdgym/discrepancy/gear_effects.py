@@ -10,7 +10,18 @@ import math
 
 from hdgym.params import GROUNDED, JointParams
 
-from .effect import Effect, FitParam, free_simulated, simulated
+from .effect import (
+    FREE,
+    HIGH_TORQUE,
+    MOVING,
+    REVERSALS,
+    SIMULATED,
+    TE,
+    TORSION,
+    TURNS,
+    Effect,
+    FitParam,
+)
 
 KE_ORDERS = (1.0, 2.0, 4.0)
 """Orders of the kinematic-error lines, per WG revolution relative to the spline whose tooth
@@ -147,15 +158,21 @@ def _amp_neutral(d):
 GEAR_EFFECTS: tuple[Effect, ...] = (
     Effect("kinematic_error", "order_lines_te",
            "kinematic error: output lags/leads motor/ratio periodically in the WG angle",
-           _ke_params, _ke_on, _ke_neutral, testable=free_simulated),
+           _ke_params, _ke_on, _ke_neutral, seen=(FREE, SIMULATED, TE, MOVING, TURNS),
+           channels="transmission_error against the WG angle", protocol="slow_constant_speed"),
     Effect("nonlinear_stiffness", "cubic_torsion",
            "hardening flexspline spring: residual cubic in the torsion",
-           _nl_params, _nl_on, _nl_neutral, testable=simulated),
+           _nl_params, _nl_on, _nl_neutral, seen=(SIMULATED, TORSION, HIGH_TORQUE),
+           channels="motor angle (locked) or transmission error against torque",
+           protocol="locked_random"),
     Effect("hysteresis", "torsion_loops",
            "hysteresis in the torsion: residual loops against torsion (Maxwell slip)",
-           _hyst_params, _hyst_on, _hyst_neutral, testable=simulated),
+           _hyst_params, _hyst_on, _hyst_neutral, seen=(SIMULATED, TORSION, REVERSALS),
+           channels="torque against torsion, at reversals", protocol="locked_random"),
     Effect("amplifier_saturation", "clipped_current",
            "amplifier saturation: current clipped at the limit and by back-EMF at speed",
-           _amp_params, _amp_on, _amp_neutral, testable=simulated),
+           _amp_params, _amp_on, _amp_neutral, seen=(SIMULATED, MOVING),
+           channels="speed and current at large commands and high speed",
+           protocol="current_steps"),
 )
 """The gear's effects, in vocabulary order."""

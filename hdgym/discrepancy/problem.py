@@ -40,6 +40,12 @@ from .restarts import Restarts
 BAD = 10.0  # residual per sample (in channel sigmas) of a run that diverged
 
 
+HORIZONS = (0.5, 0.2, 0.1, 0.05, 0.025)
+"""Prediction horizons, s, :meth:`Problem.choose_horizon` chooses from."""
+DRIFT = 1.5
+"""A horizon is kept while its NMSE stays within this factor of the lowest one's."""
+
+
 def with_sample_time(p: JointParams, dt: float) -> JointParams:
     """``p`` with ``ctrl_dt = dt``, keeping the physics substep no longer than before."""
     if abs(p.integration.ctrl_dt - dt) <= 1e-9 * dt:
@@ -147,6 +153,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
             self.mask = ~excluded if self.mask is None else self.mask & ~excluded
         self.sigma2 = {k: max(float(np.var(self._m(v))), 1e-300)
                        for k, v in self.measured.items()}
+        self.noise = R.noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
+                                  {k: self._m(v) for k, v in self.measured.items()})
         self.context = self._context()
         self.scales = self._scales()
 
@@ -198,7 +206,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
         sim = Simulator(p, locked_output=self.locked, sensors=False)
         x0 = sim.initial_state(float(self.raw.motor_angle[0]))
         n = self.u.size
-        seg = n if (self.locked or not self.segment) else max(int(round(self.segment / self.dt)), 2)
+        seg = n if not self.segment else max(int(round(self.segment / self.dt)), 2)
         if seg >= n:
             _, _, _, st = sim.trajectory(self.u, load_torque=self.t_ext, state=x0)
         else:
@@ -227,7 +235,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
                 st[a:b, L.TH_O] -= jump[1]
                 if b < n:
                     x0 = self._restart(part[b - a].copy(), b, p, at_rest)
-                    if at_rest:
+                    if at_rest and not self.locked:  # (locked: the angle is the channel)
                         jump[0] += x0[L.TH_M] - part[b - a, L.TH_M]
                         jump[1] += x0[L.TH_O] - part[b - a, L.TH_O]
                 a = b
@@ -236,6 +244,28 @@ class Problem(Restarts, InverseComparison, RecordScales):
                     output_angle=None if self.locked else R.quantize(st[:, L.TH_O], oc),
                     output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
         return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
+
+    def choose_horizon(self, p: JointParams, horizons: tuple[float, ...] = HORIZONS) -> float:
+        """Set and return the prediction horizon (s) for this record, from the record.
+
+        Multiple shooting restarts the model from the measured state every ``segment``
+        seconds. Too long, and a small speed or phase error of the model ``p`` builds up
+        into a drift no single effect explains (a resonant or stick-slip record); too short,
+        and the restarts' own errors (the measured speed is filtered) dominate. Each of
+        ``horizons`` is tried with ``p``; the longest whose NMSE stays within
+        :data:`DRIFT` of the lowest is kept.
+        """
+        if self.inverse:
+            return self.segment
+        costs = {}
+        for h in horizons:
+            self.segment = h
+            costs[h] = self.nmse(p)["mean"]
+        best = min(costs.values())
+        ok = [h for h, c in costs.items() if c <= DRIFT * best] if math.isfinite(best) else []
+        self.segment = max(ok) if ok else max(horizons)
+        self.horizons = costs
+        return self.segment
 
     def residuals(self, p: JointParams) -> dict[str, np.ndarray]:
         """Model minus measurement, per channel (masked samples dropped in inverse mode)."""

@@ -90,7 +90,40 @@ class RecordScales:
         return Scales(torque=torque, speed=speed, torsion=torsion, current=cur,
                       current_measured=cm, voltage=volt, locked=self.locked,
                       inverse=self.inverse, transmission_error=te, ke=self._ke_guess(),
-                      ripple=self._ripple_guess(), static=static)
+                      ripple=self._ripple_guess(), static=static, **self._facts(cur))
+
+    def _facts(self, largest_command: float) -> dict:
+        """What the record shows (the :class:`.effect.Condition` checks read these)."""
+        p, c = self.params, self.context
+        w = np.abs(c.speed)
+        typical = float(np.quantile(w, 0.9))
+        moving = w > 0.1 * typical if typical > 0 else np.zeros(w.size, dtype=bool)
+        sgn = np.sign(c.speed[moving])
+        reversals = int(np.count_nonzero(sgn[1:] != sgn[:-1]))
+        wm = w[moving]
+        spread = (float(np.quantile(wm, 0.9)) / max(float(np.quantile(wm, 0.1)), 1e-12)
+                  if wm.size > 10 else 1.0)
+        standstills = 0 if self.inverse else int(np.size(getattr(self, "rest_points", ())))
+        kt_out = p.motor.torque_constant * self.ratio
+        i_peak = p.amplifier.current_limit
+        if not i_peak < 1e5 or "amplifier_saturation" not in p.effects:
+            i_peak = largest_command
+        peak = max(kt_out * i_peak, 1e-12)
+        sensor = self.raw.output_torque is not None
+        if sensor or self.locked:
+            transmitted = np.abs(c.torque)
+        else:  # load torque plus what accelerates the load (the model's load inertia)
+            acc = np.gradient(c.speed, self.dt) / self.ratio
+            transmitted = np.abs(self.t_ext + p.load.torque + p.load.inertia * acc)
+        return {"moving": float(np.mean(moving)), "reversals": reversals,
+                "standstills": standstills, "wg_turns": float(np.ptp(c.theta_m)) / (2 * np.pi),
+                "speed_spread": spread,
+                "torsion_measured": bool(self.locked or sensor
+                                         or "transmission_error" in self.names),
+                "te_measured": "transmission_error" in self.names,
+                "torque_share": float(np.max(np.abs(c.torque))) / peak,
+                "moving_torque_share": (float(np.quantile(transmitted[moving], 0.9)) / peak
+                                        if moving.any() else 0.0)}
 
     def _harmonics(self, y: np.ndarray, orders: tuple[float, ...],
                    keep: np.ndarray | None = None) -> tuple[tuple[float, float, float], ...]:

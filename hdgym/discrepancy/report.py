@@ -84,6 +84,11 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
                                    "sensitivity_explained", "relative_improvement")}
             for c in diag.final_candidates],
         "untestable_effects": diag.untestable,
+        "untestable_why": dict(diag.untestable_why),
+        "outcome": diag.outcome,
+        "horizon_s": diag.horizon,
+        "noise_nmse": _nm(diag.noise),
+        "next_experiments": list(diag.next_experiments),
         "conclusion": diag.conclusion,
         "notes": list(notes or []),
         "seconds": _r(diag.seconds, 3),
@@ -229,13 +234,17 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
     lines += [
         f"Record: `{js['record']}`" + (f"; validation: `{js['validation_record']}`"
                                        if js["validation_record"] else "") + ".",
-        f"Comparison: {js['mode']} mode, channels {', '.join(js['channels'])}; base model "
+        f"Comparison: {js['mode']} mode"
+        + (f" (prediction horizon {js['horizon_s']:g} s)" if js.get("horizon_s") else "")
+        + f", channels {', '.join(js['channels'])}; base model "
         f"effects: {', '.join(js['base_effects']) or 'none'}.",
         "",
-        f"**Missing effects, in the order found: {found}.**",
+        f"**Outcome: {js.get('outcome') or '-'}. Missing effects, in the order found: "
+        f"{found}.**",
         "",
         f"NMSE ({js['nmse_on']} record, mean over channels): {js['nmse_before']} % with the base "
-        f"model fitted -> {js['nmse_after']} % after. {js['conclusion']}.",
+        f"model fitted -> {js['nmse_after']} % after (measurement noise alone: "
+        f"{(js.get('noise_nmse') or {}).get('mean')} %). {js['conclusion']}.",
         "",
     ]
     if js.get("fit_window_s"):
@@ -277,7 +286,12 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
                          f"{'-' if rel is None else f'{100 * rel:.1f} %'} |")
         lines.append("")
     if js["untestable_effects"]:
-        lines += [f"Not testable on this record: {', '.join(js['untestable_effects'])}.", ""]
+        why = js.get("untestable_why", {})
+        lines += ["## Not testable on this record", ""] + [
+            f"- {n}: {why.get(n, '')}" for n in js["untestable_effects"]] + [""]
+    if js.get("next_experiments"):
+        lines += ["## Next experiment", "", "Records of these protocols would decide what this "
+                  "one cannot:", ""] + [f"- `{c}`" for c in js["next_experiments"]] + [""]
     if js["notes"]:
         lines += ["## Notes", ""] + [f"- {n}" for n in js["notes"]] + [""]
     lines += ["## Figures", ""]

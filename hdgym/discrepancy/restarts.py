@@ -98,6 +98,7 @@ class Restarts:
     """The multiple-shooting part of :class:`.problem.Problem` (uses its record arrays)."""
 
     record: Record
+    locked: bool
     raw: R.Raw
     names: tuple[str, ...]
     dt: float
@@ -185,6 +186,11 @@ class Restarts:
         rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[k]
+        if self.locked:  # the output stays clamped: the motor angle and speed alone move
+            x[L.TH_M] = self.x_rest_angle[k] if at_rest else self.x_th_m[k]
+            x[L.W_M] = 0.0 if at_rest else self.x_w_m[k]
+            x[L.DTH] = x[L.TH_M] / r - ke(x[L.TH_M])[0] - x[L.TH_O]
+            return x
         if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
             x[L.TH_M] = self.x_rest_angle[k]
             x[L.W_M] = 0.0

@@ -58,6 +58,13 @@ the validation record when there is one, see :func:`_simpler_does_nearly_as_well
 MAX_STEPS = 4
 SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
 """Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
+RESOLVED = 0.5
+"""NMSE, percent, at or below which a residual counts as resolved when no effect is named:
+what complete base models reach on the tuned nothing-hidden cases (fit slack, restarts)."""
+NOISE_FACTOR = 3.0
+"""A residual within this factor of the measurement-noise NMSE is at the noise level."""
+FIRST_HORIZON = 0.05
+"""Prediction horizon, s, of the base fit before the record's own is chosen."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
 
@@ -119,6 +126,12 @@ def rank_candidates(problem: Problem, current: JointParams,
             continue
         sig = R.signature(eff.signature, res, w, ctx)
         sens = 0.0
+        size = math.nan
+        try:  # how much the effect, at the size the record suggests, changes the channels
+            d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
+            size = 100.0 * float(d0 @ d0) / len(problem.names)
+        except (SimulationError, ValueError):
+            pass
         try:
             q = _start(problem, current, name)
             on = _stack(problem, problem.residuals(q))
@@ -132,7 +145,8 @@ def rank_candidates(problem: Problem, current: JointParams,
         out.append({"name": name, "signature": eff.signature,
                     "signature_explained": round(sig["explained"], 4),
                     "sensitivity_explained": round(sens, 4),
-                    "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig})
+                    "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
+                    "size_nmse": size})
     out.sort(key=lambda c: -c["score"])
     return out
 
@@ -261,7 +275,8 @@ def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | Non
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
              mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
              quick: bool = False, cutoff: float | None = None,
-             segment: float | None = 0.5, fit_window: float | None = FIT_WINDOW) -> Diagnosis:
+             segment: float | str | None = "auto",
+             fit_window: float | None = FIT_WINDOW) -> Diagnosis:
     """Compare ``params`` with ``record``, find, name and add the missing effects.
 
     Args:
@@ -273,7 +288,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         max_steps: most effects added.
         quick: fewer least-squares iterations.
         cutoff: filter cutoff, Hz (default a twentieth of the sample rate).
-        segment: multiple-shooting segment length, s (see :class:`.fitting.Problem`).
+        segment: prediction horizon, s: the multiple-shooting segment length (see
+            :class:`.problem.Problem`); ``"auto"`` chooses it from the record
+            (:meth:`.problem.Problem.choose_horizon`).
         fit_window: fit and rank on the first this many seconds of a longer record
             (time is what a diagnosis costs); NMSE is then also reported on the whole
             record (``nmse_record_before`` / ``_after``). None: use it all.
@@ -283,18 +300,30 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     if fit_window and record.duration > fit_window * 1.001:
         full = record
         record = record.slice(None, float(record.time[0]) + fit_window)
-    problem = Problem(record, params, mode=mode, cutoff=cutoff, segment=segment)
+    auto = segment == "auto"
+    problem = Problem(record, params, mode=mode, cutoff=cutoff,
+                      segment=FIRST_HORIZON if auto else segment)
     vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names,
-                     segment=segment)
+                     segment=problem.segment)
              if validate is not None else None)
     nfev_base, nfev_trial, nfev_polish = (20, 10, 20) if quick else (40, 15, 30)
-    untestable = [n for n, e in REGISTRY.items() if not e.testable(problem.scales)]
+    why = {n: e.why_not(problem.scales) for n, e in REGISTRY.items()}
+    untestable_why = {n: w for n, w in why.items() if w is not None}
+    untestable = list(untestable_why)
 
     prog = bar(total=max_steps + 1, desc="diagnose", unit="fit")
     given = problem.nmse(params)
     base_paths = [fp.path for fp in model_params(params, problem.scales, params)]
     before = fit(problem, params, model_params(params, problem.scales, params),
                  max_nfev=nfev_base)
+    if auto and not problem.inverse:
+        # the horizon: chosen with the fitted base model (a given model that is some per
+        # cent off drifts on any long horizon; the fitted one only where the record does)
+        problem.choose_horizon(before.params)
+        if vprob is not None:
+            vprob.segment = problem.segment
+        nm = problem.nmse(before.params)
+        before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     current = before
     prog.update(1)
     steps: list[Step] = []
@@ -402,6 +431,17 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
+    judged = vprob or problem
+    final = judged.nmse(current.params)["mean"]
+    for c in candidates:  # effects the record's noise would hide at the size it suggests
+        if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
+            untestable_why[c["name"]] = (
+                f"at the size this record suggests it changes the compared channels by "
+                f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
+                f"({problem.noise['mean']:.2g} %)")
+    untestable = list(untestable_why)
+    outcome, nexts = _outcome(steps, final, judged.noise["mean"], candidates,
+                              untestable_why, params)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
@@ -411,12 +451,38 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_before_validation=_validate_nmse(vprob, before.params),
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
-        untestable=untestable, seconds=_time.perf_counter() - t0, problem=problem,
+        untestable=untestable, untestable_why=untestable_why, outcome=outcome,
+        horizon=None if problem.inverse else problem.segment,
+        noise=judged.noise, next_experiments=nexts,
+        seconds=_time.perf_counter() - t0, problem=problem,
         validation=vprob, fit_window=None if full is None else fit_window,
         nmse_record_before=None if full is None else _full_nmse(full, params, problem,
                                                                  before.params),
         nmse_record_after=None if full is None else _full_nmse(full, params, problem,
                                                                current.params))
+
+
+def _outcome(steps: list[Step], final: float, noise: float, candidates: list[dict],
+             untestable_why: dict[str, str], given: JointParams) -> tuple[str, list[str]]:
+    """The honest outcome and the experiments that would decide what this record cannot.
+
+    *named* when an effect was added (each had to cut the gap); else *nothing missing*
+    when the final NMSE is at the noise level (:data:`NOISE_FACTOR` x the measurement-noise
+    NMSE) or resolved (:data:`RESOLVED`); else *unexplained*. The next experiments: the
+    identification protocol of every untestable effect that is not in the model, and, for an
+    unexplained residual, of the two best-ranked candidates.
+    """
+    if steps:
+        outcome = "named"
+    elif final <= max(NOISE_FACTOR * noise, RESOLVED):
+        outcome = "nothing missing"
+    else:
+        outcome = "unexplained"
+    names = [n for n in untestable_why if n not in given.effects]
+    if outcome == "unexplained":
+        names = [c["name"] for c in candidates[:2]] + names
+    protocols = list(dict.fromkeys(REGISTRY[n].protocol for n in names if REGISTRY[n].protocol))
+    return outcome, [f"hdgym experiment {p}" for p in protocols]
 
 
 def _full_nmse(record: Record, params: JointParams, problem: Problem,
