@@ -229,6 +229,8 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
                 s = s_new
                 load = a_k
         _s(w, hz + 4, j, load)
+        # startup torque grown with the load history (eq. H4), added to the input's ripple sum
+        _s(w, T_LIN, j, _g(w, T_LIN, j) + _g(w, STARTUP, j) * load)
         if _g(w, TANH_ON, j) == 0.0:
             continue
         dts = _g(w, hz + 1, j)
@@ -358,8 +360,7 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         t_m = _g(w, KT, j) * cur
         _s(w, L.T_MOTOR, j, t_m)
         # --- motor side
-        # startup torque grown with the load history, docs/physics.md eq. H4
-        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + _g(w, STARTUP, j) * _g(w, L.HZ + 4, j)
+        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
         lvl = lvl if lvl > 0.0 else 0.0
         w_m_new, pm = _advance(w_m, t_m - t_k * _g(w, T_GEAR, j), _g(w, H_M, j),
                                _visc(w, a_in, j, w_m), lvl)
@@ -439,9 +440,9 @@ def run_block(w: np.ndarray, nl: int, n_sub: int) -> None:
     for _ in range(n_sub):
         _torsion(w, nl, nke)
         _maxwell(w, nl, nslip)
-        if any_tanh:
-            _tanh_hysteresis(w, nl)
         _ripple_sums(w, nl, nrin, nrout)
+        if any_tanh:  # after the ripple sums: it adds the startup growth to the input's
+            _tanh_hysteresis(w, nl)
         _drive_and_move(w, nl)
         _phases(w, nl, nke, nrin, nrout, grav)
     for j in range(nl):
