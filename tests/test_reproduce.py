@@ -122,7 +122,7 @@ def _random_torsion(seed: int, n: int = 12000, amp: float = 0.02) -> np.ndarray:
 
 
 def test_fit_maxwell_slip_recovers_seed002_model() -> None:
-    # seed 002's WAVE-Drive 50:1 values (PHYSICS.md §2.3)
+    # seed 002's WAVE-Drive 50:1 values (docs/physics.md eq. (4))
     true = MaxwellSlipFit(37.725, 59.863, 1.3e-4, (0.001, 42.002, 102.447, 38.151),
                           (0.335, 0.018, 0.005, 0.032), 0.0)
     x, xv = _random_torsion(1), _random_torsion(2)

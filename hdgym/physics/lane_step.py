@@ -230,6 +230,8 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
                 s = s_new
                 load = a_k
         _s(w, hz + 4, j, load)
+        # startup torque grown with the load history (eq. H4), added to the input's ripple sum
+        _s(w, T_LIN, j, _g(w, T_LIN, j) + _g(w, STARTUP, j) * load)
         if _g(w, TANH_ON, j) == 0.0:
             continue
         dts = _g(w, hz + 1, j)
@@ -370,9 +372,9 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         lvl_t = lvl_t if lvl_t > 0.0 else 0.0
         vis_t = _visc(w, a_out, j, v_rel)
         g_m = gear if mesh else 0.0
-        # --- motor side: friction eq. (7) with the startup torque grown with the load
-        # history (eq. H4), speed eq. (11)
-        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + _g(w, STARTUP, j) * _g(w, L.HZ + 4, j)
+        # --- motor side: friction eq. (7) (T_LIN holds the ripples and the startup
+        # growth, eq. H4), speed eq. (11)
+        lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
         lvl = (lvl if lvl > 0.0 else 0.0) + g_m * lvl_t
         w_m_new, pm = _advance(w_m, t_m - t_k * gear, _g(w, H_M, j),
                                _visc(w, a_in, j, w_m) + g_m * g_m * vis_t, lvl)
@@ -452,9 +454,9 @@ def run_block(w: np.ndarray, nl: int, n_sub: int) -> None:
     for _ in range(n_sub):
         _torsion(w, nl, nke)
         _maxwell(w, nl, nslip)
-        if any_tanh:
-            _tanh_hysteresis(w, nl)
         _ripple_sums(w, nl, nrin, nrout)
+        if any_tanh:  # after the ripple sums: it adds the startup growth to the input's
+            _tanh_hysteresis(w, nl)
         _drive_and_move(w, nl)
         _phases(w, nl, nke, nrin, nrout, grav)
     for j in range(nl):

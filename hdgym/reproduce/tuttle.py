@@ -39,7 +39,7 @@ from hdgym.reproduce.tuttle_steps import (
 
 #: Tuttle Table 2.8 kinematic-error peak-to-peak, output degrees
 KE_PP_DEG = {"tuttle-joint1": 0.045, "tuttle-joint3": 0.060}
-#: small-signal torsional resonance, Hz (PHYSICS.md §3-4 [D])
+#: small-signal torsional resonance, Hz (derived: docs/physics.md, "The resonance trap")
 F_N_HZ = {"tuttle-joint1": 44.0, "tuttle-joint2": 56.0, "tuttle-joint3": 56.0}
 
 def check_ke(out: Path, quick: bool) -> Item:
