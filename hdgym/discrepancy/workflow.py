@@ -18,6 +18,14 @@
 
 NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
+
+The comparison is short-horizon prediction: the model restarts from the measured state every
+horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`).
+Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
+list); the rest are listed as untestable with what the record lacks. The outcome is one of
+*named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
+residuals and untestable effects the diagnosis names the protocols (``hdgym experiment ...``)
+whose records would decide (:func:`_outcome`).
 """
 
 from __future__ import annotations
