@@ -289,7 +289,8 @@ def test_effects_say_where_they_can_be_seen():
 
 
 def test_three_outcomes_and_the_next_experiment():
-    from hdgym.discrepancy.workflow import RESOLVED, _outcome
+    from hdgym.discrepancy.outcome import RESOLVED
+    from hdgym.discrepancy.outcome import outcome_of as _outcome
 
     base = cases.case_joint()
     why = {"kinematic_error": "needs a free output"}

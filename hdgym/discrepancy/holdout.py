@@ -291,7 +291,7 @@ def page_section(quick: bool = False) -> str:
     Every case runs the workflow's quick fit settings (fewer least-squares iterations:
     31 full-preset diagnoses in one page run); ``quick`` runs the blind cases only.
     """
-    from .workflow import NOISE_FACTOR, RESOLVED
+    from .outcome import NOISE_FACTOR, RESOLVED
 
     parts = ["", "## Blind and hold-out cases (never used for tuning)", "",
              "Made by `hdgym.discrepancy.holdout` (run here by the same command): full presets "
@@ -309,7 +309,7 @@ def page_section(quick: bool = False) -> str:
              "*honest* when the outcome is \"unexplained\" or the hidden effect is listed "
              "as untestable on the record. Outcomes: *named*; *nothing missing* when the final "
              f"NMSE is within {NOISE_FACTOR:g} x the measurement-noise NMSE or at most "
-             f"{RESOLVED:g} % (`hdgym.discrepancy.workflow.NOISE_FACTOR`, `RESOLVED`, set on the "
+             f"{RESOLVED:g} % (`hdgym.discrepancy.outcome.NOISE_FACTOR`, `RESOLVED`, set on the "
              "tuned cases); *unexplained* otherwise. The prediction horizon is chosen per record "
              "(`hdgym.discrepancy.problem.Problem.choose_horizon`). These cases run the "
              "workflow's quick fit settings (fewer least-squares iterations), so the 31 "
