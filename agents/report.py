@@ -36,6 +36,7 @@ from agents.front import (
     best_classical,
     controller,
     run_batch,
+    run_grid,
     success,
     tune_and_test,
     uncut,
@@ -56,6 +57,9 @@ RATING = GEAR_RATINGS["tuttle-joint1"]
 TRAIN_SEED, TEST_SEED = 0, 100_000
 HEADER = ("| variant | rating (N m) | deadline (s) | PPO policy, success (95 % CI) | best tuned "
           "classical family (chosen on training episodes) | its success, held-out (95 % CI) |")
+#: one colour per family in every panel (``<family>+ke`` dashed in its family's colour)
+COLORS = {"const": "tab:blue", "pi": "tab:orange", "pi_ramp": "tab:green", "damp": "tab:red",
+          "damp_full": "tab:purple", "damp_enc": "tab:pink", "two_phase": "tab:brown"}
 #: the figure's deadlines
 FIG_DEADLINES = (1.5, 2.0, 2.5, 3.0)
 
@@ -92,12 +96,12 @@ def classical_runs(cfg: dict[str, Any], name: str, point: dict[str, float], seed
 
 
 def deadline_rule(front: dict[str, Any]) -> tuple[float | None, dict[str, float]]:
-    """The shortest deadline at which every family reaches the target in >= 95 % of the
+    """The shortest deadline at which every family reaches the target in >= 90 % of the
     training episodes with the torque uncapped (the front's largest cap)."""
     j = len(front["caps"]) - 1
     for i, d in enumerate(front["deadlines"]):
         fr = {k: f["front"][i][j]["train"] for k, f in front["families"].items()}
-        if min(fr.values()) >= 0.95:
+        if min(fr.values()) >= 0.9:
             return d, fr
     return None, {}
 
@@ -121,8 +125,10 @@ def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
                 continue
             i = f["deadlines"].index(d)
             for fam, v in f["families"].items():
+                base = fam.partition("+")[0]
                 ax.plot(f["caps"], [100 * e["test"] for e in v["front"][i]],
-                        label=label(fam), lw=1.2)
+                        label=label(fam), lw=1.2, color=COLORS.get(base, "tab:gray"),
+                        ls="--" if "+" in fam else "-")
             if var in pol:
                 p = pol[var]
                 ax.plot(f["caps"], [100 * success(p["time_to_target"], p["peak_torque"], cap,
@@ -135,7 +141,8 @@ def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
                 ax.set_ylabel("success, held-out (%)")
             if r == len(names) - 1:
                 ax.set_xlabel("torque cap R (N m)")
-    axes[0][0].legend(fontsize=7, loc="upper left")
+    for row in axes:
+        row[0].legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
@@ -295,14 +302,15 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     best_at = {cap: max(f["front"][i2][fronts[main_var]["caps"].index(cap)]["train"]
                         for f in fronts[main_var]["families"].values())
                for cap in (180, 190, 200, 210, 220)}
+    oj = other_joints(min(args.check_episodes, 64)) if args.check_episodes else ""
     lc = learning_curve(args.run, out / "learning_curve.png")
-    train_txt = training_text(args.run)
+    train_txt = training_text(args.run) + "\n\n" + speed_text(quick)
     (out / "front.json").write_text(json.dumps(fronts, indent=1) + "\n")
     summary["deadline_rule"] = {"deadline": d_rule, "uncapped_train_success": uncapped,
                                 "best_train_success_at_2s": best_at}
     (out / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     md = page(rows, details, checks, d_rule, uncapped, best_at, lc, train_txt, n_test, n_train,
-              quick)
+              quick, oj)
     atomic_write_text(out / "evaluation.md", md)
     return md
 
@@ -355,6 +363,56 @@ def robustness(var: str, front: dict[str, Any], n: int, summary: dict[str, Any])
             "saturates at the horizon, so it keeps doing what it does at the episode's end).\n")
 
 
+#: other joints: (preset, constant currents in A from Tuttle's step ranges to the amplifier's
+#: limit); targets above their 2x-order traps near 10,000 deg/s
+OTHER_JOINTS = (("tuttle-joint2", (1.4, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)),
+                ("tuttle-joint3", (0.28, 0.35, 0.4, 0.45, 0.5, 0.6)))
+OTHER_TARGET_DEG_S = (12_000.0, 14_000.0)
+
+
+def other_joints(n: int) -> str:
+    """Constant current steps on joints 2 and 3: is there a trap, and does crossing it
+    cost torque (the trade-off the task needs)?"""
+    verdicts = []
+    lines = [f"{n} held-out episodes per row.", "",
+             "| joint | constant current (A) | reached (of episodes) | mean time to target (s) "
+             "| peak flexspline torque mean / max (N m) |", "|---|---|---|---|---|"]
+    for name, levels in OTHER_JOINTS:
+        cfg = load_config("resonance_ppo")
+        kw = cfg["env"]["kwargs"]
+        kw["preset"] = name
+        kw["target_speed"] = [math.radians(v) for v in OTHER_TARGET_DEG_S]
+        res = run_grid(cfg, "const", [{"level": lv} for lv in levels],
+                       list(range(TEST_SEED, TEST_SEED + n)))
+        for lv, t, p in zip(levels, res["time_to_target"], res["peak_torque"], strict=True):
+            ok = np.isfinite(t)
+            tt = f"{t[ok].mean():.2f}" if ok.any() else "-"
+            lines.append(f"| {name} | {lv:g} | {pct(ok.mean())} | {tt} | {p.mean():.0f} / "
+                         f"{p.max():.0f} |")
+        reach = np.isfinite(res["time_to_target"]).mean(axis=1)
+        peaks = res["peak_torque"].mean(axis=1)
+        trapped = [lv for lv, r in zip(levels, reach, strict=True) if r < 0.5]
+        free = bool(reach[-1] >= 0.95 and peaks[-1] <= peaks.max() + 1e-9
+                    and peaks[-1] <= 1.1 * peaks.min() + 1.0)
+        verdicts.append(
+            f"{name}: trapped (reached in < 50 %) at {', '.join(f'{v:g}' for v in trapped)} A"
+            if trapped else f"{name}: no current tried stays trapped")
+        verdicts[-1] += ("; full current crosses in every episode with no more torque than "
+                         "the currents that stay below: no trade-off for a rating"
+                         if free else "; crossing costs torque here")
+    return "\n".join(lines) + "\n\n" + ".\n".join(verdicts) + ".\n"
+
+
+def speed_text(quick: bool) -> str:
+    """The training speed-up, native batch against the DummyVecEnv setup, measured here."""
+    from agents.bench import bench_resonance_training
+
+    r = bench_resonance_training(quick)
+    return (f"Side by side in this run (`agents.bench.bench_resonance_training`, also a row of "
+            f"`hdgym bench`): {r['name']}: {r['value']:,.0f} {r['unit']}; {r['reference']}: "
+            f"{r['reference_value']:,.0f}; ratio **{r['ratio']:.2f}** ({r['note']}).")
+
+
 def training_text(run: Path | None) -> str:
     if run is None or not (run / "train.json").is_file():
         return ("Training wall time: not measured in this run (`--run` not given); see "
@@ -365,14 +423,14 @@ def training_text(run: Path | None) -> str:
             f"batch (`agents.vec_env.HarmonicDriveVecEnv`, hold and torque penalty inside the "
             f"batch), seed {t['seed']}: wall time **{t['wall_time_s'] / 60:.1f} min** "
             f"({t['agent_steps_per_s']:,.0f} agent steps/s) on the shared 2-core machine, one "
-            "torch thread. The committed policy before this change took 4.9 min for the same "
-            "800k agent steps on 8 DummyVecEnv envs; the side-by-side speed-up is measured in "
-            "`results/bench.md` (section Stable-Baselines3 training).")
+            "torch thread (the wall time depends on the other jobs sharing the machine). The "
+            "policy committed before this change took 4.9 min for the same 800k agent steps on 8 "
+            "DummyVecEnv envs.")
 
 
 def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
          uncapped: dict[str, float], best_at: dict[int, float], lc: str, train_txt: str,
-         n_test: int, n_train: int, quick: bool) -> str:
+         n_test: int, n_train: int, quick: bool, oj: str) -> str:
     unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in uncapped.items())
     bat = ", ".join(f"{k} N m: {pct(v)}" for k, v in best_at.items())
     head = "**Quick smoke-test run: small grids, few episodes; not a result.**\n\n" if quick \
@@ -408,7 +466,7 @@ and KE amplitude): bring the motor from rest through the 2x-order resonance trap
 * **Deadline: {DEADLINE:g} s**, the target (speed filtered with 25 ms within 5 %) must be
   reached by then; the episode lasts 3 s, the rating holds for all of it. The deadline is
   the shortest deadline of the front at which every classical family reaches the target in
-  ≥ 95 % of the training episodes when the torque is not capped (measured: {d_rule} s;
+  ≥ 90 % of the training episodes when the torque is not capped (measured: {d_rule} s;
   uncapped training success at that deadline: {unc}).
 * Variants: `HarmonicDriveResonanceLong-v0` (deadline {LONG_DEADLINE:g} s);
   `HarmonicDriveResonanceNoTorqueSensor-v0` (encoders and current only; the classical
@@ -466,10 +524,15 @@ randomized parameter in ±30 % on {TEST_SEED + 50_000}+ seeds.
 * Beyond the 3 s horizon: the time observation saturates at the horizon; the check above
   counts the episodes that exceed the rating after it.
 
-## Not covered
+## Another joint's trap
 
-* Another joint's trap (joints 2/3 trapping as Tuttle saw) is not a registered variant:
-  the physics change that makes them trap had not landed on main when this page was made.
+Constant currents on Tuttle's joints 2 and 3 (each preset's amplifier; targets
+{OTHER_TARGET_DEG_S[0]:,.0f}-{OTHER_TARGET_DEG_S[1]:,.0f} deg/s, above their 2x-order traps
+near 10,000 deg/s; ±10 % drives):
+
+{oj or "Not run (--check-episodes 0)."}
+A variant is registered only where crossing the trap costs torque, so that a rating and a
+deadline trade against each other as on joint 1.
 """
 
 

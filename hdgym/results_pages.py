@@ -71,7 +71,7 @@ PAGES: tuple[Page, ...] = (
     Page("discrepancy", "discrepancy.md", "hidden-effect cases for the diagnosis workflow",
          ("python", "-m", "hdgym.discrepancy.cases", "--out", "{root}/discrepancy.md")),
     Page("real-data", "real-data/report.md", "diagnosis of real ZXF17 strain-wave measurements",
-         ("python", "-m", "hdgym.discrepancy.realdata", "--out", "{root}/real-data"), None),
+         ("python", "-m", "hdgym.discrepancy.realdata", "--out", "{root}/real-data")),
     Page("rl", "rl/evaluation.md", "RL policy against tuned classical controllers",
          ("python", "-m", "agents.report", "--out", "{root}/rl"),
          ("--episodes", "4", "--check-episodes", "0")),

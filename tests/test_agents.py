@@ -271,3 +271,21 @@ def test_native_hold_and_penalty_match_the_wrapped_single_env():
     assert ends == 2
     with pytest.raises(ValueError, match="action_repeat"):
         HarmonicDriveVecEnv(cfg["env"]["id"], num_envs=1, action_repeat=0)
+
+
+def test_report_refuses_quick_runs_into_results(capsys):
+    from agents.report import main as report_main
+
+    assert report_main(["--quick", "--out", "results/rl"]) == 2
+    assert "results" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_report_quick_writes_the_page(tmp_path):
+    """The whole report on small grids and 8 episodes (a few minutes)."""
+    from agents.report import main as report_main
+
+    assert report_main(["--quick", "--out", str(tmp_path / "rl")]) == 0
+    page = (tmp_path / "rl" / "evaluation.md").read_text()
+    assert "Quick smoke-test run" in page and "HarmonicDriveResonanceNoTorqueSensor-v0" in page
+    assert (tmp_path / "rl" / "front.png").is_file()

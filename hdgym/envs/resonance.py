@@ -25,7 +25,7 @@ TRAP_ONLY_CURRENT_LIMIT = 3.7
 #: 2 s deadline, so the benchmark sits where classical control is half-way, not beyond reach.
 GEAR_RATINGS = {"tuttle-joint1": 200.0}
 #: s, the default deadline: the shortest deadline of the front at which every classical
-#: family reaches the target in nearly every episode when the torque is not capped
+#: family reaches the target in >= 90 % of the training episodes when the torque is not capped
 DEADLINE = 2.0
 #: s, the long-deadline variant's deadline (the episode's whole horizon)
 LONG_DEADLINE = 3.0
