@@ -37,6 +37,8 @@ def test_committed_policy_is_small_and_carries_its_config():
     assert "torque_limit" not in kw and "deadline" not in kw
     assert set(kw["randomize"]) >= {
         "compliance.stiffness", "friction.output.coulomb", "kinematic_error.amplitude"}
+    nt = policy_config(POLICY.with_name("resonance_ppo_notorque.zip"))
+    assert nt["env"]["id"] == "HarmonicDriveResonanceNoTorqueSensor-v0"
 
 
 def test_committed_policy_succeeds_where_brute_force_breaks_the_rating():
