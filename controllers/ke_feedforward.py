@@ -1,7 +1,7 @@
 """Kinematic-error feedforward, from a kinematic-error model identified from a record.
 
-Identification (Tuttle §2.2, PHYSICS.md §5): take a slow constant-speed
-run, form the measured transmission error ``motor_angle/ratio -
+Identification (Tuttle §2.2; docs/physics.md, "Identification protocols"): take a
+slow constant-speed run, form the measured transmission error ``motor_angle/ratio -
 output_angle`` (output rad), resample it to equal WG-angle steps, and fit a
 harmonic series at chosen orders of the WG angle by least squares (with an
 offset and a linear trend that absorb the constant wind-up and any slow
@@ -201,8 +201,8 @@ class KEFeedforward:
       which changes the torque it is computed from);
     * ``torque_constant`` (N m/A) adds the current ``-T_k theta_ke'(theta_wg)/K_t``
       that cancels the torque the kinematic error feeds back to the motor
-      (power balance, PHYSICS.md §2.1: the motor sees ``T_k (1/ratio -
-      theta_ke')``), with ``T_k`` from the torque sensor (``output_torque``).
+      (power balance, docs/physics.md eqs. (2) and (11): the motor sees
+      ``T_k (1/ratio - theta_ke')``), with ``T_k`` from the torque sensor (``output_torque``).
 
     * ``load_inertia`` (kg m^2, motor-referred, with ``torque_constant``):
       the wrapped controller's inertia feedforward treats the shifted

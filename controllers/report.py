@@ -66,7 +66,8 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "targets are **not met** there; at 1.5 rev/s both are met.",
         "- Shifting the motor reference alone (\"KE ref. shift only\") is not enough and "
         "on tuttle-joint3 makes things worse: the kinematic error also feeds the "
-        "transmitted torque back to the motor (T_k θ_ke', PHYSICS.md §2.1), and the "
+        "transmitted torque back to the motor (T_k θ_ke', docs/physics.md eqs. (2) and "
+        "(11)), and the "
         "motor loop, whose bandwidth the lightly damped resonance limits, cannot follow "
         "the shifted reference without the torque and motor-only inertia terms.",
         "- The KE feedforward's wind-up term is a constant identified at one speed and "

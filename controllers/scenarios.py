@@ -190,7 +190,7 @@ def ke_orders(ratio: float, grounded: str, base: tuple[float, ...] = (1.0, 2.0, 
     """WG orders to fit: ``base`` plus the split lines of the non-grounded spline.
 
     The non-grounded port's tooth errors appear at ``n (1 -+ 1/ratio)`` of the
-    grounded-frame WG angle (PHYSICS.md §2.1); the even base orders get one.
+    grounded-frame WG angle (docs/physics.md eq. (1)); the even base orders get one.
     """
     factor = 1.0 - 1.0 / ratio if grounded == "flexspline" else 1.0 + 1.0 / ratio
     extra = tuple(n * factor for n in base if n % 2 == 0)

@@ -35,7 +35,7 @@ from scipy.optimize import brentq
 
 from controllers.base import check_nonneg, check_positive
 from controllers.pid import PID
-from hdgym.linearize import gear_factor, stiffness
+from hdgym.linearize import gear_factor, stiffness, viscous
 from hdgym.params import JointParams
 
 OUTPUTS = ("motor_velocity", "output_angle", "output_torque", "motor_angle", "output_velocity")
@@ -57,9 +57,7 @@ def linearize(p: JointParams, *, torque: float = 0.0, motor_angle: float = 0.0,
     g = gear_factor(p, motor_angle)
     k = stiffness(p, torque, hysteresis)
     c = p.compliance.damping
-    visc = "viscous_friction" in p.effects
-    bm = p.friction.input.viscous if visc else 0.0
-    bo = p.friction.output.viscous if visc else 0.0
+    bm, bo = viscous(p, motor_angle)
     jm, jo, kt = p.motor.inertia, p.load.inertia, p.motor.torque_constant
     wi = 2 * math.pi * p.amplifier.bandwidth
     # T_k = k g th_m - k th_o + c g w_m - c w_o

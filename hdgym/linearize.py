@@ -18,7 +18,7 @@ from hdgym.params import JointParams
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
 
-__all__ = ["gear_factor", "spring_slope", "spring_torque", "stiffness", "torsion_at"]
+__all__ = ["gear_factor", "spring_slope", "spring_torque", "stiffness", "torsion_at", "viscous"]
 
 
 def spring_torque(p: JointParams, torsion: float) -> float:
@@ -78,3 +78,21 @@ def gear_factor(p: JointParams, motor_angle: float = 0.0) -> float:
             n = row[L.KE_ORD + k]
             g -= row[L.KE_AMP + k] * n * math.cos(n * motor_angle + row[L.KE_PH + k])
     return g
+
+
+def viscous(p: JointParams, motor_angle: float = 0.0) -> tuple[float, float]:
+    """Linear viscous friction ``(b_motor, b_output)`` as the step applies it, N m s/rad.
+
+    ``b_motor`` acts on the motor speed (motor-referred), ``b_output`` on the
+    output speed (output-referred); both zero with ``viscous_friction`` off.
+    With ``friction.placement = "mesh"`` the transmission's viscous friction
+    acts at the mesh speed ``g w_m`` and reaches the motor as ``g^2 b``
+    (docs/physics.md eq. 8), so the output carries none.
+    """
+    if "viscous_friction" not in p.effects:
+        return 0.0, 0.0
+    bm, bo = p.friction.input.viscous, p.friction.output.viscous
+    if p.friction.placement == "mesh":
+        g = gear_factor(p, motor_angle)
+        return bm + g * g * bo, 0.0
+    return bm, bo

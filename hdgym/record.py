@@ -11,7 +11,7 @@ step. Everything is SI (s, rad, rad/s, A, N m)::
     0.0,0.0,0.0,0.0
     0.001,0.5,1.2e-05,7.5e-08
 
-Known columns (see DESIGN.md, "The record"): ``time``, ``current_command``,
+Known columns: ``time``, ``current_command``,
 ``motor_current``, ``motor_angle``, ``output_angle``, ``motor_velocity``,
 ``output_torque``, ``load_torque``. ``time`` and ``motor_angle`` are always
 required; ``output_angle`` is required unless ``locked_output`` is true. Other

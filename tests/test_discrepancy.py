@@ -289,7 +289,8 @@ def test_effects_say_where_they_can_be_seen():
 
 
 def test_three_outcomes_and_the_next_experiment():
-    from hdgym.discrepancy.workflow import RESOLVED, _outcome
+    from hdgym.discrepancy.outcome import RESOLVED
+    from hdgym.discrepancy.outcome import outcome_of as _outcome
 
     base = cases.case_joint()
     why = {"kinematic_error": "needs a free output"}
@@ -507,3 +508,50 @@ def test_cross_record_re_estimates_only_the_rotor_zero(real_result):
     assert row["recovered_rezeroed"] > 0.8
 
 
+
+
+# ---------------------------------------------------------------- blind and hold-out cases
+
+
+def test_holdout_cases_cover_every_effect_on_two_presets():
+    from hdgym.discrepancy import holdout
+
+    hc = holdout.holdout_cases()
+    assert [c.name for c in hc] == [c.name for c in holdout.holdout_cases()]  # fixed seed
+    for e in EFFECTS:
+        presets = {c.preset for c in hc if c.hidden == e}
+        assert len(presets) >= 2, e
+    assert any(c.hidden is None for c in hc)
+    assert len({c.command.split(":")[0] for c in hc}) >= 3  # several excitations
+    assert all(c.off == 0.05 for c in hc)
+    assert len(holdout.BLIND) == 9 and sum(c.hidden is None for c in holdout.BLIND) == 1
+    # the base model: the hidden effect off, every fitted parameter 2-5 % off nominal
+    case = next(c for c in hc if c.hidden == "coulomb_friction")
+    truth = holdout.preset(case.preset)
+    base = holdout.base_model(case, truth)
+    assert "coulomb_friction" not in base.effects
+    for path in ("motor.inertia", "load.inertia", "compliance.stiffness"):
+        ratio = get_value(base, path) / get_value(truth, path)
+        assert 0.02 * 0.4 - 1e-9 <= abs(ratio - 1) <= 0.05 + 1e-9, (path, ratio)
+
+
+def test_holdout_scoring_counts_honest_misses():
+    from types import SimpleNamespace
+
+    from hdgym.discrepancy import holdout
+
+    def res(hidden, outcome, found, before=10.0, after=1.0, untestable=(), size=1.0):
+        d = SimpleNamespace(outcome=outcome, missing_effects=list(found), nmse_before=before,
+                            nmse_after=after, untestable=list(untestable))
+        return holdout.Result(holdout.Blind("hduc20", hidden, "step:1"), d, 1.0, size, 0.01)
+
+    assert res("stiction", "named", ["stiction"]).hit
+    assert not res("stiction", "named", ["stiction"], after=5.0).hit  # cut < 80 %
+    miss = res("stiction", "nothing missing", [])
+    assert not miss.hit and not miss.honest
+    assert res("stiction", "nothing missing", [], untestable=["stiction"]).honest
+    assert res("stiction", "unexplained", []).honest
+    # an effect that does not change the record: nothing may be named
+    absent = res("stiction", "nothing missing", [], size=0.0)
+    assert not absent.present and absent.hit
+    assert not res("stiction", "named", ["viscous_friction"], size=0.0).honest

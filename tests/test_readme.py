@@ -155,3 +155,20 @@ def test_layout_section_matches_the_tree():
     assert not missing, f"README layout does not name {missing}"
     for path in re.findall(r"\b((?:hdgym|controllers|agents|docs)/[\w/.-]*)", layout):
         assert (ROOT / path).exists(), f"README layout names {path}, which is not in the tree"
+
+
+def test_the_project_explains_itself():
+    """No file points outside the repository: its physics notes are docs/physics.md, its data
+    ship with their licence (issue 13 item 7)."""
+    outside = ("PHYSICS.md", "DESIGN.md", "../shared", "shared/real-data", "/work/")
+    files = [ROOT / "README.md", ROOT / "pyproject.toml", *(ROOT / "docs").glob("*.md")]
+    for pkg in ("hdgym", "controllers", "agents"):
+        files += [p for p in (ROOT / pkg).rglob("*") if p.suffix in (".py", ".toml", ".md")]
+    for f in files:
+        text = f.read_text()
+        for word in outside:
+            assert word not in text, f"{f.relative_to(ROOT)} mentions {word}"
+    assert (ROOT / "docs" / "physics.md").is_file()
+    data = ROOT / "hdgym" / "discrepancy" / "data" / "zxf17"
+    assert (data / "LICENSE").is_file() and "MIT" in (data / "LICENSE").read_text()
+    assert "MIT" in README and "harivin/harmonic-drive-actuator" in README

@@ -10,12 +10,15 @@ Modules, one job each:
   the inverse-dynamics comparison in :mod:`.inverse`, sizes read from it in
   :mod:`.record_scales`);
 * :mod:`.fitting` -- bounded least-squares fits of dotted parameters;
-* :mod:`.diagnosis` -- the outcome of a diagnosis (data only);
+* :mod:`.diagnosis` -- the outcome of a diagnosis (data only); :mod:`.outcome` -- named,
+  nothing missing or unexplained, and the next experiment;
 * :mod:`.workflow` -- fit, localize, name, add, refit, repeat;
 * :mod:`.report` -- report.json + report.md + figures, written atomically;
 * :mod:`.command` -- ``hdgym diagnose``: read records, diagnose, write the report;
 * :mod:`.experiments` -- identification protocols as command signals (``hdgym experiment``);
 * :mod:`.bench` -- timing of a diagnosis;
 * :mod:`.cases` -- hidden-effect cases (``python -m hdgym.discrepancy.cases``);
-* :mod:`.realdata` -- the ZXF17 real-data loader and run.
+* :mod:`.zxf17` -- the shipped ZXF17 real data (data/zxf17) read as records;
+* :mod:`.realdata` -- the workflow on real sweeps: per-file and cross-record tables;
+* :mod:`.holdout` -- blind and hold-out cases, never used for tuning.
 """

@@ -1,4 +1,5 @@
-"""Identification protocols (PHYSICS.md section 5) as current-command signals.
+"""Identification protocols as current-command signals (docs/physics.md,
+"Identification protocols").
 
 ``generate(name, params, duration=None, seed=0)`` returns a
 :class:`~hdgym.record.Record` whose ``current_command`` (A) (and, for loaded

@@ -25,7 +25,7 @@ from .effect import (
 
 KE_ORDERS = (1.0, 2.0, 4.0)
 """Orders of the kinematic-error lines, per WG revolution relative to the spline whose tooth
-errors make them (PHYSICS.md 2.1: 2 dominant, then 4, sometimes 1)."""
+errors make them (docs/physics.md eq. (1): 2 dominant, then 4, sometimes 1)."""
 KE_SPLIT = 0.5
 """Least phase, rad, by which the other spline's line must drift against the grounded one's
 over a record for the two to be fitted apart (:func:`ke_lines`)."""

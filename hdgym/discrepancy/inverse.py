@@ -15,7 +15,7 @@ from hdgym.physics import layout as L
 from . import residuals as R
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=False)  # it inlines kernel code: a per-file cache would go stale with it
 def inverse_friction(p, flags, w_m, th_m, th_o, w_o, t_k, mu, out_in, out_out):  # pragma: no cover
     for k in range(w_m.shape[0]):
         lvl = kernel._friction_level(p, L.FIN, w_m[k], th_m[k], th_o[k], 0.0, flags)

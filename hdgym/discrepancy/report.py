@@ -39,7 +39,7 @@ def _nm(d: dict[str, float] | None) -> dict[str, float | None] | None:
 
 
 def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
-    """The report.json content (see DESIGN.md, ``hdgym diagnose``)."""
+    """The report.json content (what ``hdgym diagnose`` writes beside report.md)."""
     steps = []
     for s in diag.steps:
         steps.append({

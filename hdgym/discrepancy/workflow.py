@@ -18,6 +18,14 @@
 
 NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
+
+The comparison is short-horizon prediction: the model restarts from the measured state every
+horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`).
+Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
+list); the rest are listed as untestable with what the record lacks. The outcome is one of
+*named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
+residuals and untestable effects the diagnosis names the protocols (``hdgym experiment ...``)
+whose records would decide (:func:`_outcome`).
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ from hdgym.sim import SimulationError
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
+from .outcome import outcome_of
 from .paths import get_value, set_values
 from .problem import Problem
 from .registry import REGISTRY, model_params
@@ -58,11 +67,6 @@ the validation record when there is one, see :func:`_simpler_does_nearly_as_well
 MAX_STEPS = 4
 SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
 """Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
-RESOLVED = 0.5
-"""NMSE, percent, at or below which a residual counts as resolved when no effect is named:
-what complete base models reach on the tuned nothing-hidden cases (fit slack, restarts)."""
-NOISE_FACTOR = 3.0
-"""A residual within this factor of the measurement-noise NMSE is at the noise level."""
 FIRST_HORIZON = 0.05
 """Prediction horizon, s, of the base fit before the record's own is chosen."""
 FIT_WINDOW = 5.0
@@ -440,7 +444,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
-    outcome, nexts = _outcome(steps, final, judged.noise["mean"], candidates,
+    outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
                               untestable_why, params)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
@@ -460,29 +464,6 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                                                  before.params),
         nmse_record_after=None if full is None else _full_nmse(full, params, problem,
                                                                current.params))
-
-
-def _outcome(steps: list[Step], final: float, noise: float, candidates: list[dict],
-             untestable_why: dict[str, str], given: JointParams) -> tuple[str, list[str]]:
-    """The honest outcome and the experiments that would decide what this record cannot.
-
-    *named* when an effect was added (each had to cut the gap); else *nothing missing*
-    when the final NMSE is at the noise level (:data:`NOISE_FACTOR` x the measurement-noise
-    NMSE) or resolved (:data:`RESOLVED`); else *unexplained*. The next experiments: the
-    identification protocol of every untestable effect that is not in the model, and, for an
-    unexplained residual, of the two best-ranked candidates.
-    """
-    if steps:
-        outcome = "named"
-    elif final <= max(NOISE_FACTOR * noise, RESOLVED):
-        outcome = "nothing missing"
-    else:
-        outcome = "unexplained"
-    names = [n for n in untestable_why if n not in given.effects]
-    if outcome == "unexplained":
-        names = [c["name"] for c in candidates[:2]] + names
-    protocols = list(dict.fromkeys(REGISTRY[n].protocol for n in names if REGISTRY[n].protocol))
-    return outcome, [f"hdgym experiment {p}" for p in protocols]
 
 
 def _full_nmse(record: Record, params: JointParams, problem: Problem,

@@ -10,7 +10,7 @@ Two tasks:
 * :class:`TrackingTask` (``HarmonicDriveJoint-v0``): follow an output
   position reference (steps, sines, slow constant speed, point-to-point).
 * :class:`ResonanceTask` (``HarmonicDriveResonance-v0``): accelerate the
-  motor to a target speed above the 2x-order resonance trap (PHYSICS.md §3)
+  motor to a target speed above the 2x-order resonance trap (docs/physics.md, "The resonance trap")
   with little flexspline torque oscillation.
 
 Per-episode draws (reference shape, target speed) come from each env's own

@@ -49,6 +49,7 @@ from hdgym.params.toml_io import (
 )
 from hdgym.params.validation import (
     COMPLIANCE_MODELS,
+    FRICTION_PLACEMENTS,
     GROUNDED,
     HYSTERESIS_MODELS,
     MAX_HARMONICS,
@@ -57,9 +58,10 @@ from hdgym.params.validation import (
 )
 
 __all__ = [
-    "COMPLIANCE_MODELS", "GROUNDED", "HYSTERESIS_MODELS", "MAX_HARMONICS", "MAX_RIPPLES",
-    "MAX_SLIP_ELEMENTS", "PARTS", "Amplifier", "Compliance", "Friction", "FrictionSide",
-    "Harmonic", "Hysteresis", "Integration", "JointParams", "KinematicError", "Load", "Motor",
-    "Ripple", "Sensors", "Transmission", "atomic_write_text", "dumps", "from_dict", "load",
-    "loads", "numeric_paths", "perturb", "preset", "preset_names", "save", "to_dict",
+    "COMPLIANCE_MODELS", "FRICTION_PLACEMENTS", "GROUNDED", "HYSTERESIS_MODELS", "MAX_HARMONICS",
+    "MAX_RIPPLES", "MAX_SLIP_ELEMENTS", "PARTS", "Amplifier", "Compliance", "Friction",
+    "FrictionSide", "Harmonic", "Hysteresis", "Integration", "JointParams", "KinematicError",
+    "Load", "Motor", "Ripple", "Sensors", "Transmission", "atomic_write_text", "dumps",
+    "from_dict", "load", "loads", "numeric_paths", "perturb", "preset", "preset_names", "save",
+    "to_dict",
 ]

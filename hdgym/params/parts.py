@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 from hdgym.params.validation import (
     COMPLIANCE_MODELS,
+    FRICTION_PLACEMENTS,
     GROUNDED,
     HYSTERESIS_MODELS,
     MAX_HARMONICS,
@@ -38,9 +39,9 @@ class Motor:
         finite(self, "motor")
         require(self.inertia > 0, "motor.inertia", "> 0 kg m^2", self.inertia)
         require(self.torque_constant > 0, "motor.torque_constant", "> 0 N m/A",
-                 self.torque_constant)
+                self.torque_constant)
         require(self.back_emf_constant >= 0, "motor.back_emf_constant", ">= 0 V s/rad",
-                 self.back_emf_constant)
+                self.back_emf_constant)
         require(self.resistance > 0, "motor.resistance", "> 0 ohm", self.resistance)
 
 
@@ -63,7 +64,7 @@ class Transmission:
         finite(self, "transmission")
         require(self.n > 1, "transmission.n", "> 1 (a reduction)", self.n)
         require(self.grounded in GROUNDED, "transmission.grounded", f"one of {GROUNDED}",
-                 self.grounded)
+                self.grounded)
 
     @property
     def ratio(self) -> float:
@@ -119,17 +120,17 @@ class Compliance:
                            tuple(float(v) for v in self.segment_stiffness))
         finite(self, "compliance")
         require(self.model in COMPLIANCE_MODELS, "compliance.model",
-                 f"one of {COMPLIANCE_MODELS}", self.model)
+                f"one of {COMPLIANCE_MODELS}", self.model)
         require(self.stiffness > 0, "compliance.stiffness", "> 0 N m/rad", self.stiffness)
         require(self.cubic >= 0, "compliance.cubic", ">= 0 N m/rad^3", self.cubic)
         require(self.knee >= 0, "compliance.knee", ">= 0 rad", self.knee)
         require(self.extra_stiffness >= 0, "compliance.extra_stiffness", ">= 0 N m/rad",
-                 self.extra_stiffness)
+                self.extra_stiffness)
         require(self.damping >= 0, "compliance.damping", ">= 0 N m s/rad", self.damping)
         require(len(self.segment_torques) == 2, "compliance.segment_torques", "two values",
-                 self.segment_torques)
+                self.segment_torques)
         require(len(self.segment_stiffness) == 2, "compliance.segment_stiffness", "two values",
-                 self.segment_stiffness)
+                self.segment_stiffness)
         if self.model == "three_segment":
             t1, t2 = self.segment_torques
             require(0 < t1 < t2, "compliance.segment_torques", "0 < T1 < T2", self.segment_torques)
@@ -176,12 +177,12 @@ class Hysteresis:
         object.__setattr__(self, "element_strength", tuple(float(v) for v in self.element_strength))
         finite(self, "hysteresis")
         require(self.model in HYSTERESIS_MODELS, "hysteresis.model",
-                 f"one of {HYSTERESIS_MODELS}", self.model)
+                f"one of {HYSTERESIS_MODELS}", self.model)
         require(len(self.element_stiffness) == len(self.element_strength),
-                 "hysteresis.element_strength", "as long as element_stiffness",
-                 self.element_strength)
+                "hysteresis.element_strength", "as long as element_stiffness",
+                self.element_strength)
         require(len(self.element_stiffness) <= MAX_SLIP_ELEMENTS, "hysteresis.element_stiffness",
-                 f"at most {MAX_SLIP_ELEMENTS} elements", self.element_stiffness)
+                f"at most {MAX_SLIP_ELEMENTS} elements", self.element_stiffness)
         for k, v in enumerate(self.element_stiffness):
             require(v >= 0, f"hysteresis.element_stiffness[{k}]", ">= 0 N m/rad", v)
         for k, v in enumerate(self.element_strength):
@@ -219,7 +220,7 @@ class Ripple:
         require(self.order > 0, "ripple.order", "> 0", self.order)
         require(self.amplitude >= 0, "ripple.amplitude", ">= 0 N m", self.amplitude)
         require(self.frame in ("input", "output"), "ripple.frame", "'input' or 'output'",
-                 self.frame)
+                self.frame)
 
 
 @dataclass(frozen=True)
@@ -253,17 +254,17 @@ class FrictionSide:
         finite(self, "friction")
         require(self.coulomb >= 0, "friction.coulomb", ">= 0 N m", self.coulomb)
         require(self.breakaway >= self.coulomb, "friction.breakaway", ">= coulomb",
-                 self.breakaway)
+                self.breakaway)
         require(self.stribeck_velocity > 0, "friction.stribeck_velocity", "> 0 rad/s",
-                 self.stribeck_velocity)
+                self.stribeck_velocity)
         require(self.viscous >= 0, "friction.viscous", ">= 0 N m s/rad", self.viscous)
         require(self.cubic <= 0 or self.viscous == 0 and self.cubic >= 0, "friction.cubic",
-                 "<= 0 (a falling cubic, Tuttle eq 3.22) or >= 0 with viscous 0", self.cubic)
+                "<= 0 (a falling cubic, Tuttle eq 3.22) or >= 0 with viscous 0", self.cubic)
         require(len(self.ripple) <= MAX_RIPPLES, "friction.ripple",
-                 f"at most {MAX_RIPPLES} harmonics", len(self.ripple))
+                f"at most {MAX_RIPPLES} harmonics", len(self.ripple))
         total = sum(r.amplitude for r in self.ripple)
         require(total <= self.coulomb + 1e-12, "friction.ripple",
-                 "amplitudes summing to at most coulomb (friction never negative)", total)
+                "amplitudes summing to at most coulomb (friction never negative)", total)
 
 
 @dataclass(frozen=True)
@@ -272,17 +273,25 @@ class Friction:
 
     Attributes:
         input: wave-generator bearing and motor, motor-referred N m.
-        output: tooth mesh between flexspline and circular spline (acts on
-            the output speed, which is the FS-CS relative speed in both
-            configurations), output-referred N m.
+        output: the transmission's friction, output-referred N m, with the
+            load-dependent tooth term ``mu' |T_k|``. Where it acts is
+            ``placement``.
         tooth_mu: Coulomb coefficient at the gear teeth (Tuttle model 5).
         tooth_angle: gear-tooth pressure angle, rad (Tuttle: 30 deg).
+        placement: ``output``: the output side's friction acts between the
+            output and ground, at the output speed (the flexspline torque
+            then carries it); ``mesh``: it acts in the tooth mesh between
+            flexspline and circular spline, at the mesh's relative speed
+            ``motor_velocity (1/ratio - ke')`` and reflected to the wave
+            generator by the same factor (Tuttle §3 models 2 and 5, p. 113:
+            the flexspline torque sensor is blind to it). docs/physics.md eq. (8).
     """
 
     input: FrictionSide = field(default_factory=FrictionSide)
     output: FrictionSide = field(default_factory=FrictionSide)
     tooth_mu: float = 0.0
     tooth_angle: float = math.radians(30.0)
+    placement: str = "output"
 
     def __post_init__(self) -> None:
         for side in ("input", "output"):
@@ -292,7 +301,9 @@ class Friction:
         finite(self, "friction")
         require(self.tooth_mu >= 0, "friction.tooth_mu", ">= 0", self.tooth_mu)
         require(0 <= self.tooth_angle < math.pi / 2, "friction.tooth_angle", "in [0, pi/2) rad",
-                 self.tooth_angle)
+                self.tooth_angle)
+        require(self.placement in FRICTION_PLACEMENTS, "friction.placement",
+                f"one of {FRICTION_PLACEMENTS}", self.placement)
 
     @property
     def load_coefficient(self) -> float:
@@ -340,7 +351,7 @@ class KinematicError:
         object.__setattr__(self, "harmonics", tuple(
             h if isinstance(h, Harmonic) else Harmonic(**h) for h in self.harmonics))
         require(len(self.harmonics) <= MAX_HARMONICS, "kinematic_error.harmonics",
-                 f"at most {MAX_HARMONICS}", len(self.harmonics))
+                f"at most {MAX_HARMONICS}", len(self.harmonics))
 
 
 @dataclass(frozen=True)
@@ -407,9 +418,9 @@ class Sensors:
     def __post_init__(self) -> None:
         finite(self, "sensors")
         require(int(self.motor_counts) == self.motor_counts and self.motor_counts >= 1,
-                 "sensors.motor_counts", "a whole number >= 1", self.motor_counts)
+                "sensors.motor_counts", "a whole number >= 1", self.motor_counts)
         require(int(self.output_counts) == self.output_counts and self.output_counts >= 1,
-                 "sensors.output_counts", "a whole number >= 1", self.output_counts)
+                "sensors.output_counts", "a whole number >= 1", self.output_counts)
         require(self.torque_noise >= 0, "sensors.torque_noise", ">= 0 N m", self.torque_noise)
         require(self.current_noise >= 0, "sensors.current_noise", ">= 0 A", self.current_noise)
         require(self.delay in (0, 1), "sensors.delay", "0 or 1 samples", self.delay)
@@ -431,7 +442,7 @@ class Integration:
         finite(self, "integration")
         require(self.ctrl_dt > 0, "integration.ctrl_dt", "> 0 s", self.ctrl_dt)
         require(int(self.n_substeps) == self.n_substeps and self.n_substeps >= 1,
-                 "integration.n_substeps", "a whole number >= 1", self.n_substeps)
+                "integration.n_substeps", "a whole number >= 1", self.n_substeps)
 
     @property
     def dt(self) -> float:

@@ -15,6 +15,9 @@ from typing import Any
 GROUNDED = ("flexspline", "circular_spline")
 COMPLIANCE_MODELS = ("linear", "cubic", "two_segment", "three_segment")
 HYSTERESIS_MODELS = ("maxwell", "tanh")
+#: where the output side's friction acts: between the output and ground, or in the
+#: tooth mesh between flexspline and circular spline (reflected to the wave generator)
+FRICTION_PLACEMENTS = ("output", "mesh")
 MAX_HARMONICS = 8
 MAX_RIPPLES = 6
 MAX_SLIP_ELEMENTS = 8

@@ -1,4 +1,7 @@
-"""The compiled joint step (numba).
+"""The compiled joint step (numba), one env at a time: docs/physics.md eqs. (1)-(13).
+
+Over 500 lines on purpose: the substep and the helpers numba inlines into it stay
+in one file, so a reader sees the whole step beside the equations it cites.
 
 One substep is semi-implicit (symplectic) Euler on the two-inertia joint:
 
@@ -69,6 +72,7 @@ from hdgym.physics.layout import (
     KNEE,
     KT,
     LOAD_T,
+    MESH,
     MU_LOAD,
     N_STATE,
     NKE,
@@ -121,7 +125,7 @@ _inl = nb.njit(cache=True, fastmath={"contract"}, nogil=True, inline="always")
 
 @_inl
 def spring_torque(x: float, p: np.ndarray, flags: int) -> float:
-    """Spring torque of the flexspline at torsion ``x`` (output rad), N m."""
+    """Spring torque of the flexspline at torsion ``x`` (output rad), N m: eq. (3)."""
     k1 = p[K1]
     if not (flags & NONLIN):
         return k1 * x
@@ -148,7 +152,8 @@ def spring_torque(x: float, p: np.ndarray, flags: int) -> float:
 
 @_inl
 def _coulomb_level(p: np.ndarray, base: int, w: float, flags: int) -> float:
-    """Coulomb, Stribeck and stiction level (>= 0) at speed ``w``; ``w == 0`` means stuck."""
+    """Coulomb, Stribeck and stiction level (>= 0) at speed ``w``; ``w == 0`` means stuck:
+    eq. (7)."""
     if not (flags & COUL):
         return 0.0
     fc = p[base + F_FC]
@@ -261,7 +266,8 @@ def _level(p: np.ndarray, base: int, w: float, extra: float, flags: int, trig: n
 @_jit
 def viscous_constants(p: np.ndarray, base: int,
                       flags: int) -> tuple[int, float, float, float, float]:
-    """(mode, b1, b2, w_pk^2, f(w_pk)) of one side; mode 0 off, 1 linear, 2 cubic, 3 capped."""
+    """(mode, b1, b2, w_pk^2, f(w_pk)) of one side (eq. (7)); mode 0 off, 1 linear, 2 cubic,
+    3 capped."""
     if not (flags & VISC):
         return 0, 0.0, 0.0, 0.0, 0.0
     b1 = p[base + F_B1]
@@ -277,7 +283,7 @@ def viscous_constants(p: np.ndarray, base: int,
 
 @_inl
 def _visc(mode: int, b1: float, b2: float, wpk2: float, fpk: float, w: float) -> float:
-    """:func:`_viscous_coeff` from the constants of :func:`viscous_constants`."""
+    """:func:`_viscous_coeff` from the constants of :func:`viscous_constants` (eq. (7))."""
     if mode <= 1:
         return b1
     w2 = w * w
@@ -288,7 +294,7 @@ def _visc(mode: int, b1: float, b2: float, wpk2: float, fpk: float, w: float) ->
 
 @_inl
 def _advance(w: float, tau: float, h: float, visc: float, level: float) -> tuple[float, float]:
-    """New speed under torque ``tau``, implicit viscous and bounded Coulomb impulse.
+    """New speed under torque ``tau``, implicit viscous and bounded Coulomb impulse. Eq. (11).
 
     ``h`` is the substep over the inertia (s/(kg m^2)). Returns (new speed,
     dissipated power).
@@ -326,6 +332,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     nslip = int(p[NSLIP]) if hyst_on and not tanh_model else 0
     startup = p[STARTUP1] if (tanh_model and (flags & LOADDEP)) else 0.0
     mu = p[MU_LOAD] if (flags & LOADDEP) else 0.0
+    mesh = p[MESH] != 0.0
     amp_on = (flags & AMP) != 0
     imax = p[I_MAX]
     inv_res = 1.0 / p[RES]
@@ -359,7 +366,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     t_m = x[T_MOTOR]
     t_load = x[T_LOAD]
     for _ in range(n_sub):
-        # --- kinematic error and torsion
+        # --- kinematic error and torsion: eqs. (1), (2)
         ke = 0.0
         dke = 0.0
         for k in range(nke):
@@ -371,7 +378,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
         ddth = w_m * gear - w_o
         d_inc = dth - dth_prev
         dth_prev = dth
-        # --- hysteresis
+        # --- hysteresis: eq. (5) (tanh) or eq. (4) (Maxwell-slip)
         t_h = 0.0
         diss = 0.0
         if tanh_model:
@@ -412,8 +419,9 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
                     f = -wk
                 x[HZ + k] = f
                 t_h += f
+        # eqs. (3), (6)
         t_k = spring_torque(dth, p, flags) + cdamp * ddth + t_h
-        # --- amplifier and current loop
+        # --- amplifier and current loop: eqs. (9), (10)
         i_t = i_cmd
         if amp_on:
             if i_t > imax:
@@ -427,22 +435,29 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
                 i_t = -v_hi - back
         cur = cur + alpha * (i_t - cur)
         t_m = kt * cur
-        # --- motor side
-        lvl = _level(p, FIN, w_m, startup * x[HZ + 4], flags, trig, _RIP0[0], nrip_in)  # eq. H4
+        # --- motor side: friction eq. (7) with the startup torque eq. H4, speed eq. (11)
+        lvl = _level(p, FIN, w_m, startup * x[HZ + 4], flags, trig, _RIP0[0], nrip_in)
         vis = _visc(vm_mode, vm_b1, vm_b2, vm_pk2, vm_fpk, w_m)
+        if mesh:
+            # eq. (8): the transmission friction at the mesh speed, seen by the WG through `gear`
+            v_g = w_m * gear
+            lvl += gear * _level(p, FOUT, v_g, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
+            vis += gear * gear * _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, v_g)
         w_m_new, pm = _advance(w_m, t_m - t_k * gear, h_m, vis, lvl)
-        # --- output side
+        # --- output side: friction eqs. (7), (8), speed eq. (11)
         t_load = t_load0
         if grav != 0.0:
             t_load += grav * trig[_GRAV_PHASE]
         if locked:
             w_o_new = 0.0
             po = 0.0
+        elif mesh:
+            w_o_new, po = _advance(w_o, t_k - t_load, h_o, 0.0, 0.0)
         else:
             lvl = _level(p, FOUT, w_o, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
             vis = _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, w_o)
             w_o_new, po = _advance(w_o, t_k - t_load, h_o, vis, lvl)
-        # --- positions, bookkeeping and the phases of the new angles
+        # --- angles eq. (12), bookkeeping eq. (13), the phases of the new angles eq. (1)
         d_m = dt * w_m_new
         d_o = dt * w_o_new
         w_m = w_m_new

@@ -70,6 +70,7 @@ CDAMP = _rows()
 GRAV = _rows()
 LOAD0 = _rows()
 MU = _rows()
+MESH = _rows()  # 1: the output side's friction acts in the mesh (eq. 8)
 K1 = _rows()
 K3 = _rows()
 CMODEL = _rows()  # 0 linear, 1 cubic, 2 two-segment, 3 three-segment
@@ -153,6 +154,7 @@ def prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) ->
     locked = (flags & LOCKED) != 0
     put(w, LOCK, j, 1.0 if locked else 0.0)
     put(w, H_O, j, 0.0 if locked else dt / p[L.J_O])
+    # eqs. (9), (10): the current loop factor and the amplifier limits
     put(w, ALPHA, j, 1.0 - math.exp(-2.0 * math.pi * p[L.BW] * dt))
     if flags & AMP:
         inv_res = 1.0 / p[L.RES]
@@ -168,6 +170,7 @@ def prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) ->
     put(w, GRAV, j, p[L.GRAV])
     put(w, LOAD0, j, p[L.LOAD_T])
     put(w, MU, j, p[L.MU_LOAD] if (flags & LOADDEP) else 0.0)
+    put(w, MESH, j, p[L.MESH])
     k1 = p[L.K1]
     put(w, K1, j, k1)
     put(w, CMODEL, j, p[L.CMODEL] if (flags & NONLIN) else 0.0)

@@ -57,6 +57,7 @@ from hdgym.physics.lane_fields import (
     KT,
     LOAD0,
     LOCK,
+    MESH,
     MU,
     NKE,
     NRIP_IN,
@@ -157,7 +158,7 @@ def _rotate(w: np.ndarray, nl: int, ph: int) -> None:
 
 @inline_lane
 def _spring(w: np.ndarray, j: int, x: float) -> float:
-    """Spring torque, branch-free form of :func:`hdgym.physics.kernel.spring_torque`."""
+    """Spring torque, branch-free form of :func:`hdgym.physics.kernel.spring_torque`: eq. (3)."""
     k1 = _g(w, K1, j)
     model = _g(w, CMODEL, j)
     lin = k1 * x
@@ -179,7 +180,7 @@ def _spring(w: np.ndarray, j: int, x: float) -> float:
 
 @inline_lane
 def _advance(v0: float, tau: float, h: float, visc: float, level: float) -> tuple[float, float]:
-    """New speed and dissipated power, branch-free form of :func:`kernel._advance`."""
+    """New speed and dissipated power, branch-free form of :func:`kernel._advance`: eq. (11)."""
     inv = 1.0 / (1.0 + h * visc)
     v_free = (v0 + h * tau) * inv
     dv = h * level * inv
@@ -192,7 +193,7 @@ def _advance(v0: float, tau: float, h: float, visc: float, level: float) -> tupl
 
 @inline_lane
 def _visc(w: np.ndarray, at: int, j: int, v: float) -> float:
-    """Secant viscous coefficient (see :func:`kernel._viscous_coeff`)."""
+    """Secant viscous coefficient (see :func:`kernel._viscous_coeff`): eq. (7)."""
     v2 = v * v
     below = _g(w, at + F_B1, j) + _g(w, at + F_B2, j) * v2
     capped = _g(w, at + F_FPK, j) / abs(v)
@@ -209,7 +210,7 @@ def _block_max(w: np.ndarray, nl: int, f: int) -> int:
 
 @inline_lane
 def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
-    """The tanh hysteresis model for the lanes that use it (scalar: it needs tanh)."""
+    """The tanh hysteresis model for the lanes that use it (scalar: it needs tanh): eq. (5)."""
     hz = L.HZ
     for j in range(nl):
         if _g(w, TANH, j) == 0.0:
@@ -263,6 +264,7 @@ def _exp_neg(x: float) -> float:
 
 @inline_lane
 def _torsion(w: np.ndarray, nl: int, nke: int) -> None:
+    """Kinematic error, torsion, gear factor, torsion rate and increment: eqs. (1), (2)."""
     for j in range(nl):
         _s(w, T_KE, j, 0.0)
         _s(w, T_DKE, j, 0.0)
@@ -285,6 +287,7 @@ def _torsion(w: np.ndarray, nl: int, nke: int) -> None:
 
 @inline_lane
 def _maxwell(w: np.ndarray, nl: int, nslip: int) -> None:
+    """Maxwell-slip elements and their slip dissipation: eq. (4)."""
     for k in range(nslip):
         hz = L.HZ + k
         for j in range(nl):
@@ -306,7 +309,8 @@ def _maxwell(w: np.ndarray, nl: int, nslip: int) -> None:
 
 @inline_lane
 def _ripple_sums(w: np.ndarray, nl: int, nrin: int, nrout: int) -> None:
-    """Position-dependent friction of each side, summed over its ripples, into T_LIN/T_LOUT."""
+    """Position-dependent friction of each side, summed over its ripples, into T_LIN/T_LOUT:
+    the ripple term of eq. (7)."""
     for side in range(2):
         at = SIDE[side] + F_RA
         out = T_LIN if side == 0 else T_LOUT
@@ -320,7 +324,7 @@ def _ripple_sums(w: np.ndarray, nl: int, nrin: int, nrout: int) -> None:
 @inline_lane
 def _level(w: np.ndarray, at: int, j: int, v: float, ripple: float) -> float:
     """Coulomb-type level of one side at speed ``v`` (0: stuck) before the load term:
-    Coulomb or breakaway, the Stribeck hump, plus the ripple sum."""
+    Coulomb or breakaway, the Stribeck hump, plus the ripple sum. Eq. (7)."""
     fc = _g(w, at + F_FC, j)
     stuck = _g(w, at + F_STUCK, j)  # loaded before the select: a conditional load
     base = stuck if v == 0.0 else fc  # would keep the loop from vectorizing
@@ -339,11 +343,11 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
     a_in = SIDE[0]
     a_out = SIDE[1]
     for j in range(nl):
-        # --- transmitted torque
+        # --- transmitted torque: eqs. (3), (6)
         t_k = _spring(w, j, _g(w, T_DTH, j)) + _g(w, CDAMP, j) * _g(w, T_DDTH, j) \
             + _g(w, T_TH, j)
         _s(w, L.TK, j, t_k)
-        # --- amplifier and current loop
+        # --- amplifier and current loop: eqs. (9), (10)
         w_m = _g(w, L.W_M, j)
         w_o = _g(w, L.W_O, j)
         imax = _g(w, IMAX, j)
@@ -359,22 +363,31 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         _s(w, L.CUR, j, cur)
         t_m = _g(w, KT, j) * cur
         _s(w, L.T_MOTOR, j, t_m)
-        # --- motor side
+        # --- transmission friction (eq. 8): at the output speed, or at the mesh speed
+        # w_m * gear and reflected to the WG by gear (placement mesh)
+        gear = _g(w, T_GEAR, j)
+        mesh = _g(w, MESH, j) != 0.0
+        v_rel = w_m * gear if mesh else w_o
+        lvl_t = _level(w, a_out, j, v_rel, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
+        lvl_t = lvl_t if lvl_t > 0.0 else 0.0
+        vis_t = _visc(w, a_out, j, v_rel)
+        g_m = gear if mesh else 0.0
+        # --- motor side: friction eq. (7) (T_LIN holds the ripples and the startup
+        # growth, eq. H4), speed eq. (11)
         lvl = _level(w, a_in, j, w_m, _g(w, T_LIN, j)) + 0.0
-        lvl = lvl if lvl > 0.0 else 0.0
-        w_m_new, pm = _advance(w_m, t_m - t_k * _g(w, T_GEAR, j), _g(w, H_M, j),
-                               _visc(w, a_in, j, w_m), lvl)
-        # --- output side
+        lvl = (lvl if lvl > 0.0 else 0.0) + g_m * lvl_t
+        w_m_new, pm = _advance(w_m, t_m - t_k * gear, _g(w, H_M, j),
+                               _visc(w, a_in, j, w_m) + g_m * g_m * vis_t, lvl)
+        # --- output side: speed eq. (11)
         t_load = _g(w, LOAD0, j) + _g(w, TEXT, j)
         t_load = t_load + _g(w, GRAV, j) * _g(w, SIN + P_GRAV, j)
-        lvl = _level(w, a_out, j, w_o, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
-        lvl = lvl if lvl > 0.0 else 0.0
-        w_o_new, po = _advance(w_o, t_k - t_load, _g(w, H_O, j), _visc(w, a_out, j, w_o), lvl)
+        lvl = 0.0 if mesh else lvl_t
+        w_o_new, po = _advance(w_o, t_k - t_load, _g(w, H_O, j), 0.0 if mesh else vis_t, lvl)
         locked = _g(w, LOCK, j) != 0.0
         w_o_new = 0.0 if locked else w_o_new
         po = 0.0 if locked else po
         _s(w, L.T_LOAD, j, t_load)
-        # --- angles and bookkeeping
+        # --- angles eq. (12) and bookkeeping eq. (13)
         dt = _g(w, DT, j)
         d_m = dt * w_m_new
         d_o = dt * w_o_new
@@ -393,7 +406,8 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
 
 @inline_lane
 def _phases(w: np.ndarray, nl: int, nke: int, nrin: int, nrout: int, grav: bool) -> None:
-    """Rotate every phase by its angle's increment over the substep."""
+    """Rotate every phase by its angle's increment over the substep (the phases of eq. (1)
+    and of the ripple term of eq. (7))."""
     for k in range(nke):
         for j in range(nl):
             _s(w, T_D, j, _g(w, KE_O + k, j) * _g(w, T_DM, j))

@@ -73,6 +73,7 @@ TANH_B1 = _col("hysteresis.width_slope")
 TANH_G1 = _col("hysteresis.shape_slope")
 STARTUP1 = _col("hysteresis.startup_slope")
 MU_LOAD = _col("friction.load_coefficient")
+MESH = _col("friction.placement")  # 0 output (to ground), 1 mesh (FS-CS, seen by the WG)
 NKE = _col("kinematic_error.n_harmonics")
 KE_ORD = _col("kinematic_error.order", MAX_HARMONICS)  # effective order of the WG angle
 KE_AMP = _col("kinematic_error.amplitude", MAX_HARMONICS)
@@ -161,6 +162,7 @@ def pack(p: JointParams) -> np.ndarray:
     row[TANH_G1] = h.shape_slope
     row[STARTUP1] = h.startup_slope
     row[MU_LOAD] = p.friction.load_coefficient
+    row[MESH] = 1.0 if p.friction.placement == "mesh" else 0.0
     _pack_side(row, FIN, p.friction.input)
     _pack_side(row, FOUT, p.friction.output)
     ke = p.kinematic_error.harmonics

@@ -1,4 +1,5 @@
-"""Plain-numpy reference of the joint step, vectorized over the batch.
+"""Plain-numpy reference of the joint step, vectorized over the batch: docs/physics.md
+eqs. (1)-(13).
 
 Slow, readable and independent of numba: tests check that the compiled
 :mod:`hdgym.physics.kernel` agrees with it. Same algorithm (see the kernel's
@@ -21,7 +22,7 @@ def _on(flags: np.ndarray, name: str) -> np.ndarray:
 
 
 def spring(x: np.ndarray, p: np.ndarray, flags: np.ndarray) -> np.ndarray:
-    """Spring torque for a batch of torsions ``x`` (output rad), N m."""
+    """Spring torque for a batch of torsions ``x`` (output rad), N m: eq. (3)."""
     k1 = p[:, L.K1]
     lin = k1 * x
     ax = np.abs(x)
@@ -62,6 +63,7 @@ def spring_energy(x: np.ndarray, p: np.ndarray, flags: np.ndarray) -> np.ndarray
 
 
 def _ke(th_m: np.ndarray, p: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kinematic error and its slope: eq. (1)."""
     ke = np.zeros_like(th_m)
     dke = np.zeros_like(th_m)
     on = _on(flags, "kinematic_error")
@@ -76,6 +78,7 @@ def _ke(th_m: np.ndarray, p: np.ndarray, flags: np.ndarray) -> tuple[np.ndarray,
 
 def _level(p: np.ndarray, base: int, w: np.ndarray, th_in: np.ndarray, th_out: np.ndarray,
            extra: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Coulomb-type friction level of one side: eq. (7)."""
     fc = p[:, base + L.F_FC]
     fs = p[:, base + L.F_FS]
     r = w / p[:, base + L.F_WS]
@@ -91,6 +94,7 @@ def _level(p: np.ndarray, base: int, w: np.ndarray, th_in: np.ndarray, th_out: n
 
 
 def _visc(p: np.ndarray, base: int, w: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """Secant viscous coefficient of one side: eq. (7)."""
     b1 = p[:, base + L.F_B1]
     b2 = p[:, base + L.F_B2]
     w2 = w * w
@@ -104,6 +108,7 @@ def _visc(p: np.ndarray, base: int, w: np.ndarray, flags: np.ndarray) -> np.ndar
 
 def _advance(w: np.ndarray, tau: np.ndarray, inertia: np.ndarray, visc: np.ndarray,
              level: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """New speeds and dissipated power: eq. (11)."""
     denom = 1.0 + dt * visc / inertia
     v_free = (w + dt * tau / inertia) / denom
     dv = dt * level / inertia / denom
@@ -121,6 +126,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     r = p[:, L.RATIO]
     th_m, w_m, th_o, w_o = x[:, L.TH_M], x[:, L.W_M], x[:, L.TH_O], x[:, L.W_O]
     ke, dke = _ke(th_m, p, flags)
+    # eq. (2)
     dth = th_m / r - th_o - ke
     gear = 1.0 / r - dke
     ddth = w_m * gear - w_o
@@ -129,7 +135,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     hyst = _on(flags, "hysteresis")
     tanh_memory = p[:, L.HMODEL] == 1.0  # kept with hysteresis off: the load history
     tanh_model = hyst & tanh_memory
-    # Maxwell-slip
+    # Maxwell-slip: eq. (4)
     t_h = np.zeros(len(x))
     diss = np.zeros(len(x))
     for k in range(MAX_SLIP_ELEMENTS):
@@ -143,7 +149,7 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
         x[:, L.HZ + k] = np.where(use, fc, x[:, L.HZ + k])
         t_h += np.where(use, fc, 0.0)
         diss += np.where(use, slip, 0.0)
-    # tanh element, last-reversal memory, load history: docs/physics.md eqs. H1-H3
+    # tanh element, last-reversal memory, load history: eq. (5), docs/physics.md eqs. H1-H3
     s = x[:, L.HZ + 2]
     s_new = np.where(d_inc > REVERSAL_DEADBAND, 1.0, np.where(d_inc < -REVERSAL_DEADBAND, -1.0, s))
     rev = tanh_memory & (s_new != s)
@@ -160,9 +166,10 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     th_tanh = dts + (s * width - dts) * np.tanh(gam * s * (dth - x[:, L.HZ]))
     x[:, L.HZ + 3] = np.where(tanh_model, th_tanh, x[:, L.HZ + 3])
     t_h = np.where(tanh_model, th_tanh, t_h)
+    # eqs. (3), (6)
     t_k = spring(dth, p, flags) + p[:, L.CDAMP] * ddth + t_h
     x[:, L.TK] = t_k
-    # amplifier
+    # amplifier: eq. (9); current loop: eq. (10)
     amp = _on(flags, "amplifier_saturation")
     hi = (p[:, L.V_MAX] - p[:, L.KB] * w_m) / p[:, L.RES]
     lo = (-p[:, L.V_MAX] - p[:, L.KB] * w_m) / p[:, L.RES]
@@ -175,21 +182,30 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.T_MOTOR] = t_m
     startup = np.where(tanh_memory & _on(flags, "load_dependent_friction"),  # eq. H4
                        p[:, L.STARTUP1] * x[:, L.HZ + 4], 0.0)
-    lvl = _level(p, L.FIN, w_m, th_m, th_o, startup, flags)
-    w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], _visc(p, L.FIN, w_m, flags), lvl,
-                           dt)
-    t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext
     mu = np.where(_on(flags, "load_dependent_friction"), p[:, L.MU_LOAD], 0.0)
-    lvl = _level(p, L.FOUT, w_o, th_m, th_o, mu * np.abs(t_k), flags)
-    w_o_free, po = _advance(w_o, t_k - t_load, p[:, L.J_O], _visc(p, L.FOUT, w_o, flags), lvl, dt)
+    # eq. (8): the transmission friction acts at the output speed (placement output) or at
+    # the mesh speed w_m * gear, reflected to the WG by `gear` (placement mesh)
+    mesh = p[:, L.MESH] != 0.0
+    v_rel = np.where(mesh, w_m * gear, w_o)
+    lvl_t = _level(p, L.FOUT, v_rel, th_m, th_o, mu * np.abs(t_k), flags)
+    vis_t = _visc(p, L.FOUT, v_rel, flags)
+    g_m = np.where(mesh, gear, 0.0)
+    lvl = _level(p, L.FIN, w_m, th_m, th_o, startup, flags) + g_m * lvl_t
+    vis = _visc(p, L.FIN, w_m, flags) + g_m * g_m * vis_t
+    w_m_new, pm = _advance(w_m, t_m - t_k * gear, p[:, L.J_M], vis, lvl, dt)
+    t_load = p[:, L.LOAD_T] + p[:, L.GRAV] * np.sin(th_o) + t_ext
+    w_o_free, po = _advance(w_o, t_k - t_load, p[:, L.J_O], np.where(mesh, 0.0, vis_t),
+                            np.where(mesh, 0.0, lvl_t), dt)
     locked = (flags & LOCKED_OUTPUT_BIT) != 0
     w_o_new = np.where(locked, 0.0, w_o_free)
     po = np.where(locked, 0.0, po)
     x[:, L.T_LOAD] = t_load
     x[:, L.W_M] = w_m_new
     x[:, L.W_O] = w_o_new
+    # eq. (12)
     x[:, L.TH_M] = th_m + dt * w_m_new
     x[:, L.TH_O] = th_o + dt * w_o_new
+    # eq. (13)
     x[:, L.E_DISS] += dt * (pm + po + p[:, L.CDAMP] * ddth**2) + diss
     x[:, L.W_MOTOR] += dt * t_m * w_m_new
     x[:, L.W_LOAD] -= dt * t_load * w_o_new

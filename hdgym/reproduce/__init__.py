@@ -10,6 +10,7 @@ and the page writer in :mod:`.common`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 from hdgym.reproduce import seyfferth, tuttle
@@ -17,16 +18,21 @@ from hdgym.reproduce.analysis import (
     LoopMetrics,
     OrderSpectrum,
     PlateauResult,
+    RunUp,
+    StepRuns,
     frequency_response,
     grows_smoothly,
     ke_order_spectrum,
     loop_metrics,
     plateau_jump,
+    plateau_near,
     resonance_peak,
+    run_up,
     starting_current,
+    step_runs,
     step_table,
 )
-from hdgym.reproduce.common import Item, Paper, run_items, write_page
+from hdgym.reproduce.common import Check, Item, Paper, echo_items, run_items, write_page
 
 #: the registered papers, in page order
 PAPERS: dict[str, Paper] = {p.name: p for p in (tuttle.PAPER, seyfferth.PAPER)}
@@ -34,8 +40,11 @@ PAPERS: dict[str, Paper] = {p.name: p for p in (tuttle.PAPER, seyfferth.PAPER)}
 CHOICES = (*PAPERS, "all")
 
 
-def run(which: str, out: Path, quick: bool = False) -> bool:
-    """Run one paper's items (or ``all``), write ``out/fidelity.md`` and the figures.
+def run(which: str, out: Path, quick: bool = False, echo: Callable[[str], None] | None = print
+        ) -> bool:
+    """Run one paper's items (or ``all``), write ``out/fidelity.md`` and the figures, and
+    print each item's checks (the paper's passage and number, the tolerance, the model's
+    number, PASS/FAIL) through ``echo`` (None: silent).
 
     Returns True if every item passed.
 
@@ -48,12 +57,16 @@ def run(which: str, out: Path, quick: bool = False) -> bool:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     results = [(paper, run_items(paper, out, quick)) for paper in papers]
+    if echo is not None:
+        for _, items in results:
+            echo_items(items, echo)
     write_page(out, f"hdgym reproduce {which} --out {out}", results, quick)
     return all(it.passed for _, items in results for it in items)
 
 
 __all__ = [
-    "CHOICES", "PAPERS", "Item", "LoopMetrics", "OrderSpectrum", "Paper", "PlateauResult",
-    "frequency_response", "grows_smoothly", "ke_order_spectrum", "loop_metrics", "plateau_jump",
-    "resonance_peak", "run", "starting_current", "step_table",
+    "CHOICES", "Check", "Item", "LoopMetrics", "OrderSpectrum", "PAPERS", "Paper", "PlateauResult",
+    "RunUp", "StepRuns", "echo_items", "frequency_response", "grows_smoothly", "ke_order_spectrum",
+    "loop_metrics", "plateau_jump", "plateau_near", "resonance_peak", "run", "run_up",
+    "starting_current", "step_runs", "step_table",
 ]

@@ -4,6 +4,8 @@
 - :func:`step_table` / :func:`starting_current`: batched current steps from rest (Tuttle §2.6);
 - :func:`plateau_jump` / :func:`grows_smoothly`: a velocity plateau and its breakout;
 - :func:`frequency_response` / :func:`resonance_peak`: H1 estimate and its peak;
+- :func:`plateau_near` / :func:`run_up`: a plateau near a speed, and the torque
+  fluctuation against speed pooled over the steps (resonant areas);
 - :func:`loop_metrics`: hardening and hysteresis of a torque / wind-up loop.
 
 Everything is deterministic.
@@ -122,50 +124,167 @@ def starting_current(p: JointParams, currents: np.ndarray | None = None, duratio
 # ===================================================================== (b) current steps
 
 
-def step_table(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
-               duration: float = 4.0, average: float = 2.0, traces: bool = False
-               ) -> tuple[np.ndarray, np.ndarray | None]:
+@dataclass(frozen=True)
+class StepRuns:
+    """Tuttle §2.6 current steps from rest: what each step did over its last ``average`` s.
+
+    Attributes:
+        currents: step currents, A.
+        speed: mean WG speed, rad/s.
+        torque_mean: mean flexspline torque (the torque sensor's reading), N m.
+        torque_peak: largest |flexspline torque| in the window, N m.
+        torque_std: standard deviation of the flexspline torque in the window, N m.
+        wg_speed: WG speed of every step at every control period, rad/s, ``(n, n_currents)``.
+        torque: flexspline torque likewise, N m.
+        ctrl_dt: control period, s.
+    """
+
+    currents: np.ndarray
+    speed: np.ndarray
+    torque_mean: np.ndarray
+    torque_peak: np.ndarray
+    torque_std: np.ndarray
+    wg_speed: np.ndarray
+    torque: np.ndarray
+    ctrl_dt: float
+
+
+def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
+              duration: float = 4.0, average: float = 2.0) -> StepRuns:
     """Tuttle §2.6 current steps from rest, all in one batched kernel call per period.
 
     Args:
         p: the joint, or one joint per current.
         currents: step currents, A.
         duration: length of each step, s.
-        average: the mean speed is taken over the last ``average`` s.
-        traces: also return the WG speed of every env at every control period.
+        average: the statistics are taken over the last ``average`` s.
 
-    Returns:
-        ``(mean WG speed per current in rad/s, traces (n_steps, n_currents) in rad/s or None)``.
+    Raises:
+        ValueError: joints that differ in control period or substeps, or a count mismatch.
+        RuntimeError: a step diverged (names the current).
     """
     currents = np.asarray(currents, dtype=float)
     plist = p if isinstance(p, list) else [p] * currents.size
     if len(plist) != currents.size:
-        raise ValueError("step_table: one joint per current, or one joint for all")
+        raise ValueError("step_runs: one joint per current, or one joint for all")
     ps = np.stack([L.pack(q) for q in plist])
     fl = np.array([flags_of(q.effects) for q in plist], dtype=np.int64)
     dts = {q.integration.ctrl_dt for q in plist}
     subs = {int(q.integration.n_substeps) for q in plist}
     if len(dts) != 1 or len(subs) != 1:
-        raise ValueError("step_table: all joints must share ctrl_dt and n_substeps")
+        raise ValueError("step_runs: all joints must share ctrl_dt and n_substeps")
     dt, n_sub = dts.pop(), subs.pop()
     xs = L.initial_state(ps, fl)
     bad = np.zeros(currents.size, dtype=bool)
     zero = np.zeros(currents.size)
     n = int(round(duration / dt))
     start = n - int(round(average / dt))
-    acc = np.zeros(currents.size)
-    out = np.empty((n, currents.size)) if traces else None
+    w = np.empty((n, currents.size))
+    tk = np.empty((n, currents.size))
     step = kernel.step_parallel if currents.size > 2 else kernel.step_serial
     for k in range(n):
         step(xs, ps, currents, zero, dt / n_sub, n_sub, fl, bad)
         if bad.any():
-            raise RuntimeError(f"step_table: diverged at t = {k * dt:.4g} s, current "
+            raise RuntimeError(f"step_runs: diverged at t = {k * dt:.4g} s, current "
                                f"{currents[np.argmax(bad)]} A")
-        if out is not None:
-            out[k] = xs[:, L.W_M]
-        if k >= start:
-            acc += xs[:, L.W_M]
-    return acc / (n - start), out
+        w[k] = xs[:, L.W_M]
+        tk[k] = xs[:, L.TK]
+    ww, tw = w[start:], tk[start:]
+    speed = ww.mean(axis=0)
+    return StepRuns(currents=currents, speed=speed, torque_mean=tw.mean(axis=0),
+                    torque_peak=np.abs(tw).max(axis=0), torque_std=tw.std(axis=0), wg_speed=w,
+                    torque=tk, ctrl_dt=dt)
+
+
+def step_table(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
+               duration: float = 4.0, average: float = 2.0, traces: bool = False
+               ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Mean WG speed of each current step (:func:`step_runs`), rad/s.
+
+    Returns:
+        ``(mean WG speed per current in rad/s, traces (n_steps, n_currents) in rad/s or None)``.
+    """
+    runs = step_runs(p, currents, duration, average)
+    return runs.speed, (runs.wg_speed if traces else None)
+
+
+def plateau_near(currents: np.ndarray, speeds: np.ndarray, target: float, tol: float = 0.15,
+                 spread: float = 0.10, min_len: int = 3) -> tuple[int, int] | None:
+    """The longest run of consecutive currents whose speeds lie within ``spread`` of each
+    other (max/min - 1) and whose mean lies within ``tol`` of ``target`` (a resonance
+    plateau, Tuttle §2.6); None if no run has ``min_len`` currents."""
+    sp = np.asarray(speeds, dtype=float)
+    best: tuple[int, int] | None = None
+    for a in range(sp.size):
+        for b in range(a + min_len - 1, sp.size):
+            s = sp[a: b + 1]
+            if s.min() <= 0 or s.max() / s.min() - 1 > spread:
+                break
+            if abs(s.mean() / target - 1) <= tol and (best is None or b - a > best[1] - best[0]):
+                best = (a, b)
+    return best
+
+
+@dataclass(frozen=True)
+class RunUp:
+    """Torque fluctuation against WG speed, pooled over current steps (an order run-up).
+
+    Attributes:
+        speed: centre of each speed bin, °/s (bins with too few windows dropped).
+        level: median over the bin's windows of the flexspline torque's standard
+            deviation about its linear trend, N m.
+    """
+
+    speed: np.ndarray
+    level: np.ndarray
+
+    def prominence(self, target: float, tol: float = 0.15) -> tuple[float, float]:
+        """``(height, speed)`` of the largest level within ``target (1 +- tol)`` over the
+        higher of the two flanking minima (``target/2 .. target(1 - tol)`` and
+        ``target(1 + tol) .. 2 target``), and the speed of that level; NaN when a
+        flank or the window has no data."""
+        sp, lv = self.speed, self.level
+        win = (sp >= (1 - tol) * target) & (sp <= (1 + tol) * target)
+        left = (sp >= 0.5 * target) & (sp < (1 - tol) * target)
+        right = (sp > (1 + tol) * target) & (sp <= 2.0 * target)
+        if not (win.any() and left.any() and right.any()):
+            return math.nan, math.nan
+        k = np.flatnonzero(win)[np.argmax(lv[win])]
+        return float(lv[k] / max(lv[left].min(), lv[right].min())), float(sp[k])
+
+
+def run_up(runs: StepRuns, window: float = 0.05, skip: float = 0.2, lo: float = 1000.0,
+           hi: float = 60000.0, n_bins: int = 60, min_count: int = 3) -> RunUp:
+    """Pool every step's record into a run-up curve (Tuttle §2.6: the joints pass through
+    their resonant regions on the way up, and torque fluctuations grow there).
+
+    Each step's record after ``skip`` s is cut into windows of ``window`` s; a window
+    gives its mean WG speed and the standard deviation of the flexspline torque about
+    the window's linear trend (so acceleration does not count). Windows are binned by
+    speed (``n_bins`` geometric bins, ``lo``-``hi`` °/s) and each bin with at least
+    ``min_count`` windows reports their median.
+    """
+    m = max(int(round(window / runs.ctrl_dt)), 3)
+    k0 = int(round(skip / runs.ctrl_dt))
+    w = np.degrees(runs.wg_speed[k0:])
+    t = runs.torque[k0:]
+    n_win = w.shape[0] // m
+    w = w[:n_win * m].reshape(n_win, m, -1)
+    t = t[:n_win * m].reshape(n_win, m, -1)
+    x = np.arange(m) - (m - 1) / 2.0
+    slope = np.einsum("kmc,m->kc", t, x) / float(x @ x)
+    resid = t - t.mean(axis=1, keepdims=True) - slope[:, None, :] * x[None, :, None]
+    speed = w.mean(axis=1).ravel()
+    fluct = resid.std(axis=1).ravel()
+    edges = np.geomspace(lo, hi, n_bins + 1)
+    idx = np.digitize(speed, edges) - 1
+    centres, levels = [], []
+    for b in range(n_bins):
+        sel = idx == b
+        if sel.sum() >= min_count:
+            centres.append(math.sqrt(edges[b] * edges[b + 1]))
+            levels.append(float(np.median(fluct[sel])))
+    return RunUp(np.array(centres), np.array(levels))
 
 
 @dataclass(frozen=True)
