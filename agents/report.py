@@ -126,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
                     "%(default)s); training episodes for tuning are half as many")
     ap.add_argument("--check-episodes", type=int, default=256,
                     help="episodes of the +-30 %% and beyond-the-horizon checks (0: skip)")
+    ap.add_argument("--fronts", nargs="+", type=Path,
+                    help="fronts written by python -m agents.front --ke 200 2 (one per config) "
+                    "instead of computing them here")
     ap.add_argument("--quick", action="store_true", help="small grids and 8 episodes")
     ap.add_argument("--out", type=Path, default=Path("runs/rl"),
                     help="folder to write (default %(default)s; committed: --out results/rl)")
@@ -158,6 +161,13 @@ def build(args: argparse.Namespace, quick: bool) -> str:
         print(msg, file=sys.stderr)
 
     fronts: dict[str, Any] = {}
+    given = {}  # fronts from agents.front, by config name
+    for path in args.fronts or []:
+        f = json.loads(Path(path).read_text())
+        if f["test_seeds"] != [TEST_SEED, n_test] or f["train_seeds"] != [TRAIN_SEED, n_train]:
+            raise ValueError(f"{path}: seeds {f['train_seeds']}/{f['test_seeds']} are not the "
+                             f"report's {[TRAIN_SEED, n_train]}/{[TEST_SEED, n_test]}")
+        given[f["config"]] = f
     pol: dict[str, dict[str, np.ndarray]] = {}
     rows, details = [], []
     summary: dict[str, Any] = {"variants": {}}
@@ -172,6 +182,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
         same = next((v for v in fronts if VARIANTS[v][0] == VARIANTS[var][0]), None)
         if same:
             front = fronts[same]
+        elif VARIANTS[var][0] in given:
+            front = given[VARIANTS[var][0]]
         else:
             front = tune_and_test(cfg, grids, train_seeds, test_seeds, CAPS, DEADLINES, log)
             add_ke(cfg, front, RATING, deadline, 6.0, train_seeds, test_seeds, quick, log)
@@ -372,14 +384,20 @@ def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
         else ""
     return f"""# Resonance trap: the learned policy against tuned classical controllers
 
-{head}Regenerate (training about 2 min per policy on the shared machine; the report a few
-minutes):
+{head}Regenerate (each command is independent of the others until the last; training takes
+about 2 min per policy on an idle 2-core machine, each front about 10 min):
 
     python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
     cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
     python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0
     cp runs/resonance_ppo_notorque-s0/final.zip agents/policies/resonance_ppo_notorque.zip
-    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl
+    python -m agents.front --config resonance_ppo --ke 200 2 --out runs/rl/front_resonance_ppo.json
+    python -m agents.front --config resonance_ppo_notorque --ke 200 2 \\
+        --out runs/rl/front_resonance_ppo_notorque.json
+    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl \\
+        --fronts runs/rl/front_resonance_ppo.json runs/rl/front_resonance_ppo_notorque.json
+
+(`agents.report` without `--fronts` computes the fronts itself.)
 
 The 5-seed study: `hdgym sweep rl --out results/sweeps/rl-run --summary-dir results/sweeps`
 (`results/sweeps/rl.md`).
