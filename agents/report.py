@@ -124,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
                     "wall time)")
     ap.add_argument("--episodes", type=int, default=256, help="held-out episodes (default "
                     "%(default)s); training episodes for tuning are half as many")
+    ap.add_argument("--train-episodes", type=int, help="training episodes for the tuning "
+                    "(default: half of --episodes)")
     ap.add_argument("--check-episodes", type=int, default=256,
                     help="episodes of the +-30 %% and beyond-the-horizon checks (0: skip)")
     ap.add_argument("--fronts", nargs="+", type=Path,
@@ -153,7 +155,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     """Run everything and write the page; returns its markdown."""
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    n_test, n_train = args.episodes, max(args.episodes // 2, 1)
+    n_test = args.episodes
+    n_train = args.train_episodes or max(args.episodes // 2, 1)
     test_seeds = list(range(TEST_SEED, TEST_SEED + n_test))
     train_seeds = list(range(TRAIN_SEED, TRAIN_SEED + n_train))
 
@@ -391,10 +394,12 @@ about 2 min per policy on an idle 2-core machine, each front about 10 min):
     cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
     python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0
     cp runs/resonance_ppo_notorque-s0/final.zip agents/policies/resonance_ppo_notorque.zip
-    python -m agents.front --config resonance_ppo --ke 200 2 --out runs/rl/front_resonance_ppo.json
-    python -m agents.front --config resonance_ppo_notorque --ke 200 2 \\
+    python -m agents.front --config resonance_ppo --ke 200 2 --train 64 --test 200 \\
+        --out runs/rl/front_resonance_ppo.json
+    python -m agents.front --config resonance_ppo_notorque --ke 200 2 --train 64 --test 200 \\
         --out runs/rl/front_resonance_ppo_notorque.json
-    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl \\
+    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl --episodes 200 \\
+        --train-episodes 64 --check-episodes 200 \\
         --fronts runs/rl/front_resonance_ppo.json runs/rl/front_resonance_ppo_notorque.json
 
 (`agents.report` without `--fronts` computes the fronts itself.)
