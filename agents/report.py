@@ -131,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fronts", nargs="+", type=Path,
                     help="fronts written by python -m agents.front --ke 200 2 (one per config) "
                     "instead of computing them here")
+    ap.add_argument("--note", default="", help="provenance note printed at the top of the page "
+                    "(e.g. where the committed policies were trained)")
     ap.add_argument("--quick", action="store_true", help="small grids and 8 episodes")
     ap.add_argument("--out", type=Path, default=Path("runs/rl"),
                     help="folder to write (default %(default)s; committed: --out results/rl)")
@@ -256,6 +258,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     (out / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     md = page(rows, details, checks, d_rule, uncapped, best_at, lc, train_txt, n_test, n_train,
               quick, oj, sf)
+    if args.note:
+        md = md.replace("\n\n", f"\n\n**Note.** {args.note}\n\n", 1)
     atomic_write_text(out / "evaluation.md", md)
     return md
 
