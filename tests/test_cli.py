@@ -321,3 +321,18 @@ def test_bundled_spec_name_beside_a_folder_of_that_name(tmp_path, monkeypatch, c
     results = _fake_repo(tmp_path)
     assert main(["sweep", "controllers", "--quick", "--out", str(results / "x")]) == 2
     assert "quick runs never write into results/" in capsys.readouterr().err  # spec was found
+
+
+def test_results_goes_on_after_a_failed_fidelity_check(tmp_path, monkeypatch, capsys):
+    """reproduce exits 1 when a check fails but has written its page: the build goes on."""
+    import subprocess as sp
+
+    ran = []
+
+    def fake_run(cmd, *a, **k):
+        ran.append(cmd)
+        return sp.CompletedProcess(cmd, 1 if len(ran) == 1 else 0)
+
+    monkeypatch.setattr(sp, "run", fake_run)
+    assert main(["results", "--out", str(tmp_path / "r"), "--only", "fidelity", "numerics"]) == 0
+    assert len(ran) == 2 and "fidelity: exit 1" in capsys.readouterr().err

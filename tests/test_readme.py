@@ -88,7 +88,8 @@ def run_line(line: str, cwd: Path) -> None:
             argv = ["bash", "-c", part]
         proc = subprocess.run(argv, cwd=cwd, env=env(), capture_output=True, text=True,
                               timeout=1800)
-        assert proc.returncode == 0, f"{part}\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}"
+        ok = (0, 1) if part.startswith("hdgym reproduce") else (0,)  # 1: a check failed
+        assert proc.returncode in ok, f"{part}\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}"
         assert "Traceback" not in proc.stderr, f"{part}\n{proc.stderr[-4000:]}"
 
 

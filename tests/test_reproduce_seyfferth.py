@@ -87,3 +87,8 @@ def test_rh25_ablation_hysteresis_damps_most(tmp_path):
     item = S.check_ablation(tmp_path, quick=True)
     assert item.passed, item.measured
     assert (tmp_path / "seyfferth_rh25_ablation.png").exists()
+
+
+def test_rh32_viscous_share_is_small(tmp_path):
+    item = S.check_viscous_share(tmp_path, quick=True)
+    assert item.passed, item.measured
