@@ -27,11 +27,11 @@ README = (ROOT / "README.md").read_text()
 
 #: exact README text -> the short setting the tests run instead
 SHORT = {
-    "verbose=1).learn(total_timesteps=20_000)":
+    "verbose=1).learn(total_timesteps=2_048)":
         "verbose=0, n_steps=64, batch_size=64).learn(total_timesteps=64)",
-    "n_steps=256).learn(total_timesteps=50_000)":
+    "n_steps=256).learn(total_timesteps=16_384)":
         "n_steps=2, batch_size=128).learn(total_timesteps=128)",
-    "--total-timesteps 20000": "--total-timesteps 64 --n-envs 2",
+    "--total-timesteps 4096": "--total-timesteps 64 --n-envs 2",
     "--episodes 20": "--episodes 2",
 }
 #: commands that take minutes: run only with -m slow
