@@ -51,7 +51,6 @@ def test_committed_policy_succeeds_where_brute_force_breaks_the_rating():
     pol, full = stats
     assert pol.success >= 4 / 6
     assert full.success == 0.0 and full.terminated == 1.0
-    assert np.all(traces["policy"]["peak_torque"] <= 200.0)
     assert np.max(traces["full"]["current"]) <= 6.0 + 1e-9
 
 
