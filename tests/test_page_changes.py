@@ -79,3 +79,9 @@ def test_bench_page_names_load_missing_sections_and_what_moved(tmp_path: Path) -
     assert "Not measured: the sections of `agents` (cannot import agents.bench" in second
     assert "| Physics | physics, 1 env · bare loop | value | 1000 | 1500 | +50 % |" in second
     assert "| Physics | physics, 1 env · bare loop | ratio | 0.5 | 0.75 | +50 % |" in second
+
+
+def test_a_change_from_zero_or_rounding_noise_is_given_as_a_difference() -> None:
+    page = "## S\n\n| m | std |\n|---|---|\n| a | {} |\n"
+    sec = moved_section(page.format("1.17e-16"), page.format("0.01667"))
+    assert "| S | a | std | 1.17e-16 | 0.01667 | +0.0167 |" in sec
