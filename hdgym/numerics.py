@@ -18,6 +18,7 @@ import numpy as np
 
 from hdgym.commands import command_signal
 from hdgym.effects import flags_of
+from hdgym.page_changes import moved_section
 from hdgym.params import JointParams, atomic_write_text
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
@@ -148,7 +149,9 @@ def write_table(out: Path, quick: bool = False) -> None:
                              f"{r['torque_rms']:.2e} |")
         lines.append("")
     lines += _step_table_section(quick)
-    atomic_write_text(out, "\n".join(lines))
+    text = "\n".join(lines)
+    moved = moved_section(Path(out), text)  # what this run changed against the page it replaces
+    atomic_write_text(out, text + ("\n" + moved if moved else ""))
 
 
 def _step_table_section(quick: bool) -> list[str]:
@@ -165,7 +168,7 @@ def _step_table_section(quick: bool) -> list[str]:
     p = preset("tuttle-joint1")
     lines = ["## tuttle-joint1: Tuttle's current-step table against the substep", "",
              "Mean input speed over the last 2 s of 4 s current steps from rest (°/s), as in "
-             "`hdgym reproduce tuttle` item (b).", "",
+             "`hdgym reproduce tuttle` item T2.", "",
              "| n_substeps | " + " | ".join(f"{c:g} A" for c in currents) + " |",
              "|---|" + "---|" * len(currents)]
     for n_sub in (5, 10, 20, 40):

@@ -99,6 +99,9 @@ def test_long_jobs_show_progress(path):
 def test_reproduce_items_run_under_a_bar(tmp_path, capsys):
     import time
 
+    if os.environ.get("TQDM_DISABLE"):
+        pytest.skip("progress bars switched off (TQDM_DISABLE)")
+
     from hdgym.reproduce.common import Item, Paper, run_items
 
     def slow_item(out, quick):

@@ -27,11 +27,11 @@ README = (ROOT / "README.md").read_text()
 
 #: exact README text -> the short setting the tests run instead
 SHORT = {
-    "verbose=1).learn(total_timesteps=20_000)":
+    "verbose=1).learn(total_timesteps=2_048)":
         "verbose=0, n_steps=64, batch_size=64).learn(total_timesteps=64)",
-    "n_steps=256).learn(total_timesteps=50_000)":
+    "n_steps=256).learn(total_timesteps=16_384)":
         "n_steps=2, batch_size=128).learn(total_timesteps=128)",
-    "--total-timesteps 20000": "--total-timesteps 64 --n-envs 2",
+    "--total-timesteps 4096": "--total-timesteps 64 --n-envs 2",
     "--episodes 20": "--episodes 2",
 }
 #: commands that take minutes: run only with -m slow
@@ -88,7 +88,8 @@ def run_line(line: str, cwd: Path) -> None:
             argv = ["bash", "-c", part]
         proc = subprocess.run(argv, cwd=cwd, env=env(), capture_output=True, text=True,
                               timeout=1800)
-        assert proc.returncode == 0, f"{part}\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}"
+        ok = (0, 1) if part.startswith("hdgym reproduce") else (0,)  # 1: a check failed
+        assert proc.returncode in ok, f"{part}\n{proc.stdout[-2000:]}\n{proc.stderr[-4000:]}"
         assert "Traceback" not in proc.stderr, f"{part}\n{proc.stderr[-4000:]}"
 
 

@@ -317,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
         "Tuttle's joints), the second only when it drifts by at least 0.5 rad against the "
         "first over the record. The tuttle-joint1 case (161:1, flexspline grounded: lines at "
         "2 (1 - 1/161), 2 and 4 (1 - 1/161) per WG turn) needs them: with the grounded lines "
-        "only, its validation NMSE rose by 10 % instead of falling.",
+        "only, its validation NMSE rose instead of falling (an earlier run).",
         "- The per-effect tests in `tests/test_discrepancy.py` run the same cases on 2 s "
         "records.",
         "",
@@ -327,21 +327,21 @@ def main(argv: list[str] | None = None) -> int:
         "vanishing Stribeck velocity). Between the two, the simpler one is preferred when it "
         "achieves 75 % of the other's improvement, judged on the validation record when "
         "there is one (`PARSIMONY`).",
-        "- Stiction on `breakaway_ramps` passes with the smallest margin after Stribeck "
-        "friction: the stick-slip cost stays rough (the motor side slips in small steps while "
-        "the spring winds up, each slip rings the lightly damped ~22 Hz motor-spring mode), "
-        "so the fitted stiffness and inertias stay some per cent off and the validation NMSE "
-        "ends near 0.5 %, not near the truth's 0.002 %. A held torque within a per cent of "
-        "the breakaway level makes the cost step where the model's static level crosses it "
-        "(the model breaks away at the restart rather than tens of ms later).",
+        "- Stiction on `breakaway_ramps` is the hardest tuned case: the stick-slip cost stays "
+        "rough (the motor side slips in small steps while the spring winds up, each slip "
+        "rings the lightly damped motor-spring mode), so the fitted stiffness and inertias "
+        "stay some per cent off and the validation NMSE stays well above the truth's. A held "
+        "torque within a per cent of the breakaway level makes the cost step where the "
+        "model's static level crosses it (the model breaks away at the restart rather than "
+        "tens of ms later).",
         "- Kinematic error on the full tuttle-joint1 preset (all ten effects on, the other "
         "nine perturbed) is not a case: one 3 s slow-constant-speed record in one direction "
         "does not pin down its ~30 other parameters (hysteresis, Stribeck, stiction, tooth "
         "friction, the output-frame friction ripple, amplifier) to the 1-2 % that the "
         "near-constant speed channel's NMSE needs on a validation record at another speed and "
-        "direction: with the split lines kinematic error is named first and the "
-        "transmission-error NMSE falls from 100 % to about 10 %, but the mean validation NMSE "
-        "only by about half. The case uses the preset's drive with the case effects instead.",
+        "direction (an earlier run named kinematic error first but cut the mean validation "
+        "NMSE only by about half). The case uses the preset's drive with the case effects "
+        "instead.",
         "- NMSE is normalized by each channel's variance; a nearly constant channel (the "
         "torque at constant speed) gives very large NMSE values for small offsets, as in the "
         "position-dependent-friction row.",

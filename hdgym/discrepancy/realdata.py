@@ -36,7 +36,15 @@ from hdgym.record import Record
 from .diagnosis import Diagnosis
 from .paths import get_value, set_values
 from .problem import Problem
-from .zxf17 import DATA, Sweep, breakaway_torque, display_name, read_sweep, sweep_files
+from .zxf17 import (
+    DATA,
+    FAULT_MARGIN,
+    Sweep,
+    breakaway_torque,
+    display_name,
+    read_sweep,
+    sweep_files,
+)
 from .zxf17 import load_friction_sweep as load_friction_sweep
 from .zxf17 import zxf17_params as zxf17_params
 
@@ -221,7 +229,7 @@ def notes(r: SweepResult) -> list[str]:
     ]
     if sw.faults:
         out.append("Rows flagged with a fault code are not compared (nor "
-                   f"{1e3 * 0.05:.0f} ms around them): " + "; ".join(
+                   f"{1e3 * FAULT_MARGIN:.0f} ms around them): " + "; ".join(
                        f"code {f.code}: {len(f.rows)} rows between t = {min(f.times):.2f} and "
                        f"{max(f.times):.2f} s" for f in sw.faults) + ".")
     viscous_edge = any(abs(fo.viscous - v0 * f) <= 1e-6 * v0

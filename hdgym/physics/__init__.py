@@ -17,30 +17,33 @@ if "NUMBA_THREADING_LAYER" not in os.environ:
 
 
 def _drop_stale_compiled_cache() -> None:
-    """Delete numba's on-disk cache of this package when any physics source changed.
+    """Delete numba's on-disk caches in the hdgym package when a physics source changed.
 
     Numba keys a cached function on its own file's timestamp, not on the
-    modules it imports, while the compiled steps inline code and constants
-    across modules (lanes from lane_fields, lane_step and kernel; all from
-    layout, effects and the parameter limits). An edit to one of those files
-    would otherwise leave stale machine code in the others' cache. One hash
-    over all of them decides; a read-only install just keeps its cache.
+    modules it imports, while compiled code inlines code and constants across
+    modules (lanes from lane_fields, lane_step and kernel; envs, hardware and
+    bench from the physics; all from layout, effects and the parameter
+    limits). An edit to one of those files would otherwise leave stale machine
+    code in the others' caches. One hash over the physics sources decides; every
+    ``__pycache__`` of the package then loses its ``.nbi``/``.nbc`` files. A
+    read-only install just keeps its cache.
     """
     import hashlib
     from pathlib import Path
 
     here = Path(__file__).parent
-    sources = sorted(here.glob("*.py")) + [here.parent / "effects.py",
-                                           here.parent / "params" / "validation.py"]
+    package = here.parent
+    sources = sorted(here.glob("*.py")) + [package / "effects.py",
+                                           package / "params" / "validation.py"]
     try:
         digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
-        cache = here / "__pycache__"
-        stamp = cache / "physics-sources.sha256"
+        stamp = here / "__pycache__" / "physics-sources.sha256"
         if stamp.is_file() and stamp.read_text() == digest:
             return
-        for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
-            f.unlink(missing_ok=True)
-        cache.mkdir(exist_ok=True)
+        for cache in package.rglob("__pycache__"):
+            for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+                f.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
         stamp.write_text(digest)
     except OSError:  # read-only or racing another process: numba recompiles as needed
         pass

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hdgym.page_changes import moved_section
 from hdgym.params import JointParams, atomic_write_text
 
 
@@ -174,7 +175,10 @@ def write_page(out: Path, command: str, results: Sequence[tuple[Paper, list[Item
             lines.append("")
             lines += [f"![{it.key}]({fig})" for fig in it.figures]
             lines.append("")
-    atomic_write_text(out / "fidelity.md", "\n".join(lines))
+    text = "\n".join(lines) + "\n"
+    # what this run changed against the page it replaces (after a physics change, say)
+    moved = moved_section(out / "fidelity.md", text)
+    atomic_write_text(out / "fidelity.md", text + ("\n" + moved if moved else ""))
 
 
 def echo_items(items: Sequence[Item], echo: Callable[[str], None] = print) -> None:

@@ -148,6 +148,8 @@ def check_eq14(out: Path, quick: bool) -> Item:
                 "input rotation per ampere over the last two cycles, eq. 14 fitted (K_t/J_1 fixed) "
                 f"to the points at or above half the peak; tolerance ζ ±{ZETA_TOL:.0%}, ω_n "
                 f"±{OMEGA_TOL:.0%}")
+    item.role = ("tuned on: seyfferth-rh32 hysteresis.width, width_slope and shape (see "
+                 "the preset's [sources]); not an independent check of them")
     p = preset("seyfferth-rh32")
     freqs = _freqs(1.0, 6.0, quick)
     kj = p.motor.torque_constant / p.motor.inertia
@@ -158,7 +160,11 @@ def check_eq14(out: Path, quick: bool) -> Item:
         g, _ = gain_curve(p, amp, freqs)
         fit = fit_second_order(freqs, g, kj)
         ez, ew = fit.zeta / z_p - 1, fit.omega_n / w_p - 1
-        good = abs(ez) <= ZETA_TOL and abs(ew) <= OMEGA_TOL
+        passage = "§4.2 eq. 14, fit to fig. 21 in the resonance region"
+        good = item.check(f"RH-32 {amp:g} A: ζ", passage, f"{z_p}", f"±{ZETA_TOL:.0%}",
+                          f"{fit.zeta:.3f} ({100 * ez:+.0f} %)", abs(ez) <= ZETA_TOL)
+        good &= item.check(f"RH-32 {amp:g} A: ω_n", passage, f"{w_p} rad/s", f"±{OMEGA_TOL:.0%}",
+                           f"{fit.omega_n:.1f} rad/s ({100 * ew:+.0f} %)", abs(ew) <= OMEGA_TOL)
         ok &= good
         item.measured.append(
             f"{amp:g} A: ζ {fit.zeta:.3f} (paper {z_p}, {100 * ez:+.0f} %), ω_n {fit.omega_n:.1f} "
@@ -171,7 +177,7 @@ def check_eq14(out: Path, quick: bool) -> Item:
         ax.plot(fine, SecondOrder(z_p, w_p, kj).gain(fine), "--", lw=1.2, color=color,
                 label=f"paper eq. 14: ζ {z_p}, ω_n {w_p}")
     _transfer_axes(ax, 6.0, 1.5, "RH-32, locked output (beside Seyfferth fig. 21 / eq. 14)")
-    return _print(finish(item, fig, out / "seyfferth_rh32_eq14.png", ok))
+    return finish(item, fig, out / "seyfferth_rh32_eq14.png", ok)
 
 
 # ===================================================================== (g) RH-32 step
@@ -192,7 +198,11 @@ def check_step(out: Path, quick: bool) -> Item:
     th = st[:, L.TH_M]
     peak, final = float(th.max()), float(th[-1])
     over = (peak - final) / final if final > 0 else math.inf
-    ok = peak <= 0.6 and over <= 0.05
+    item.role = "held-out check: no preset number was tuned on this item"
+    ok = item.check("RH-32 1.1 A step from rest: largest input angle, overshoot",
+                    "fig. 22; no significant overshoot or vibrations (§4.2)", "<= 0.6 rad, none",
+                    "<= 0.6 rad, overshoot <= 5 %", f"{peak:.3f} rad, {100 * over:.1f} %",
+                    peak <= 0.6 and over <= 0.05)
     item.measured.append(f"largest input angle {peak:.3f} rad (paper <= 0.6), final {final:.3f} "
                          f"rad, overshoot {100 * over:.1f} % {_verdict(ok)}")
     item.measured.append(f"rise to 90 % of the final angle in "
@@ -212,7 +222,7 @@ def check_step(out: Path, quick: bool) -> Item:
     ax.set_ylabel("input angle [rad]")
     ax.set_title("RH-32 step input response (beside Seyfferth fig. 22)", fontsize=10)
     ax.legend(fontsize=8)
-    return _print(finish(item, fig, out / "seyfferth_rh32_step.png", ok))
+    return finish(item, fig, out / "seyfferth_rh32_step.png", ok)
 
 
 def _step_after_cycle(sim: Any, sign: float) -> float:
@@ -249,10 +259,20 @@ def check_fig18(out: Path, quick: bool) -> Item:
         peaks.append(float(g[k]))
         fres.append(float(freqs[k]))
         ax.plot(freqs, g, style, marker="o", ms=2.5, label=f"model {amp:g} amp")
-    gain_ok = max(peaks) <= FIG18_MAX_GAIN
-    f_ok = all(abs(f / FIG18_F_RES - 1) <= 0.15 for f in fres)
-    fall_ok = fres[-1] <= fres[0]
-    grow_ok = bool(np.all(np.diff(peaks) > 0))
+    item.role = ("tuned on: seyfferth-rh25 hysteresis.width, width_slope, shape and shap"
+                 "e_slope (see the preset's [sources]); not an independent check of them")
+    gtxt = " / ".join(f"{g:.2f}" for g in peaks) + " rad/A"
+    ftxt = " / ".join(f"{f:.3g}" for f in fres) + " Hz"
+    gain_ok = item.check("RH-25 1 / 1.5 / 2 A: largest transfer function", "fig. 18's axis",
+                         f"<= {FIG18_MAX_GAIN} rad/A", "every peak below", gtxt,
+                         max(peaks) <= FIG18_MAX_GAIN)
+    grow_ok = item.check("RH-25: gain grows with the amplitude", "§4.1", "grows",
+                         "1 A < 1.5 A < 2 A", gtxt, bool(np.all(np.diff(peaks) > 0)))
+    f_ok = item.check("RH-25: resonance", "fig. 18", f"≈ {FIG18_F_RES:g} Hz", "±15 % each",
+                      ftxt, all(abs(f / FIG18_F_RES - 1) <= 0.15 for f in fres))
+    fall_ok = item.check("RH-25: resonance vs. amplitude", "a slight reduction in the "
+                         "resonance frequency with increasing excitation amplitudes (§4.1)",
+                         "falls slightly", "2 A <= 1 A", ftxt, fres[-1] <= fres[0])
     ok = gain_ok and f_ok and fall_ok and grow_ok
     item.measured.append(
         "peak gain " + " / ".join(f"{g:.2f}" for g in peaks)
@@ -264,7 +284,7 @@ def check_fig18(out: Path, quick: bool) -> Item:
         f"{'falls' if fres[-1] < fres[0] else 'stays' if fres[-1] == fres[0] else 'rises'} "
         f"from 1 A to 2 A {_verdict(fall_ok)}")
     _transfer_axes(ax, 12.0, 1.8, "RH-25, locked output (beside Seyfferth fig. 18)")
-    return _print(finish(item, fig, out / "seyfferth_rh25_fig18.png", ok))
+    return finish(item, fig, out / "seyfferth_rh25_fig18.png", ok)
 
 
 # ===================================================================== (i) RH-25 stick-slip
@@ -282,8 +302,14 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     below, above = np.array([1.0, 1.5, 2.0]), np.array([3.0, 4.0, 5.0])
     _, st_lo = gain_curve(p, 1.0, below)
     _, st_hi = gain_curve(p, 1.0, above)
-    ok_lo = bool(np.all(st_lo > 0))
-    ok_hi = bool(np.all(st_hi == 0))
+    item.role = "held-out check: no preset number was tuned on this item"
+    passage = "stick-slip cycles for f < 2.5 Hz that disappeared at higher frequencies (§4.1)"
+    ok_lo = item.check("RH-25 1 A: motor sticks at 1, 1.5, 2 Hz", passage, "stick-slip",
+                       "stuck part of each cycle", " / ".join(f"{100 * x:.0f} %" for x in st_lo),
+                       bool(np.all(st_lo > 0)))
+    ok_hi = item.check("RH-25 1 A: motor never sticks at 3, 4, 5 Hz", passage, "none",
+                       "never stuck", " / ".join(f"{100 * x:.1f} %" for x in st_hi),
+                       bool(np.all(st_hi == 0)))
     item.measured.append("stuck fraction of the last two cycles at "
                          + ", ".join(f"{f:g} Hz {100 * s:.0f} %" for f, s in zip(below, st_lo,
                                                                                    strict=True))
@@ -302,7 +328,7 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     ax.set_ylabel("input angle [rad]")
     ax.set_title("RH-25, i_m = 1 amp (beside Seyfferth fig. 19)", fontsize=10)
     ax.legend(fontsize=8)
-    return _print(finish(item, fig, out / "seyfferth_rh25_fig19.png", ok_lo and ok_hi))
+    return finish(item, fig, out / "seyfferth_rh25_fig19.png", ok_lo and ok_hi)
 
 
 # ===================================================================== (j) RH-25 ablation
@@ -350,8 +376,15 @@ def check_ablation(out: Path, quick: bool) -> Item:
     most = min(dz, key=dz.get)
     least_z = min(dz, key=lambda k: abs(dz[k]))
     least_g = min(dg, key=lambda k: abs(dg[k]))
-    ok = (most == "hysteresis" and least_z == least_g == "velocity-dependent friction"
-          and abs(dg["startup torque"]) > 0.20)
+    item.role = "held-out check: no preset number was tuned on this item"
+    ok = item.check("RH-25 1.5 A, effects off in turn: ζ and peak gain",
+                    "§4.1's simulation runs with friction and damping values set to zero",
+                    "hysteresis damps most, viscous friction least, startup torque moves the "
+                    "gain", "largest ζ drop: hysteresis; smallest changes: viscous; startup off "
+                    "moves the peak > 20 %", f"largest drop {most}; smallest {least_z} / "
+                    f"{least_g}; startup off {100 * dg['startup torque']:+.0f} %",
+                    most == "hysteresis" and least_z == least_g == "velocity-dependent friction"
+                    and abs(dg["startup torque"]) > 0.20)
     item.measured.append(f"all effects: ζ {z0:.3f}, peak {g0:.2f} rad/A")
     for k in ABLATIONS:
         item.measured.append(f"{k} off: ζ {rows[k][0]:.3f} ({dz[k]:+.3f}), peak {rows[k][1]:.2f} "
@@ -359,7 +392,7 @@ def check_ablation(out: Path, quick: bool) -> Item:
     item.measured.append(f"largest ζ drop: {most}; smallest change: {least_z} (ζ), {least_g} "
                          f"(peak) {_verdict(ok)}")
     _transfer_axes(ax, 8.0, 0.0, "RH-25, 1.5 A: effects switched off one at a time (§4.1)")
-    return _print(finish(item, fig, out / "seyfferth_rh25_ablation.png", ok))
+    return finish(item, fig, out / "seyfferth_rh25_ablation.png", ok)
 
 
 def check_viscous_share(out: Path, quick: bool) -> Item:
@@ -375,6 +408,7 @@ def check_viscous_share(out: Path, quick: bool) -> Item:
                 "switching viscous friction off lowers ζ by at most 0.05, and switching the "
                 "startup torque or the hysteresis off lowers it by more than that, at both "
                 "amplitudes")
+    item.role = "held-out check: no preset number was tuned on this item"
     base = preset("seyfferth-rh32")
     plt = plt_module()
     fig, ax = plt.subplots(figsize=(7, 4.5))
@@ -384,26 +418,23 @@ def check_viscous_share(out: Path, quick: bool) -> Item:
         z0 = rows["all effects"][0]
         dz = {k: z0 - rows[k][0] for k in ABLATIONS}
         v = dz["velocity-dependent friction"]
-        good = v <= 0.05 and dz["startup torque"] > v and dz["hysteresis"] > v
+        good = item.check(f"RH-32 {amp:g} A: ζ lowered by viscous / startup / hysteresis off",
+                          "b1/(2 J1 ω_n) in the neighbourhood of 0.02-0.03; damping mostly from "
+                          "motor friction and hysteresis (§4.2)", "0.02-0.03 viscous share",
+                          "viscous <= 0.05, the others more", " / ".join(
+                              f"{dz[k]:.3f}" for k in ABLATIONS),
+                          v <= 0.05 and dz["startup torque"] > v and dz["hysteresis"] > v)
         ok &= good
         item.measured.append(f"{amp:g} A: ζ {z0:.3f} with all effects; lowered by "
                              + ", ".join(f"{dz[k]:.3f} with {k} off" for k in ABLATIONS)
                              + f" (paper: viscous share 0.02-0.03) {_verdict(good)}")
     _transfer_axes(ax, 6.0, 0.0, "RH-32: effects switched off one at a time (§4.2)")
-    return _print(finish(item, fig, out / "seyfferth_rh32_ablation.png", ok))
-
-
-def _print(item: Item) -> Item:
-    """Echo the item to the terminal as it finishes (the page gets the same lines)."""
-    print(f"({item.key}) {item.title}: {_verdict(item.passed)}")
-    for m in item.measured:
-        print(f"    {m}")
-    return item
+    return finish(item, fig, out / "seyfferth_rh32_ablation.png", ok)
 
 
 def check_maxwell_slip(out: Path, quick: bool) -> Item:
     """(e) Maxwell-slip identifiability from records of other models (seed 002)."""
-    return _print(check_identifiability(out, quick))
+    return check_identifiability(out, quick)
 
 
 PAPER = Paper("seyfferth", "Seyfferth & Angeles (1995) and seed 002: hysteresis, startup torque, "
