@@ -194,7 +194,7 @@ def default_grids(i_max: float, quick: bool = False) -> dict[str, list[dict[str,
     deg = math.radians
     levels = np.round(np.linspace(0.6, 1.0, 3 if quick else 9) * i_max, 3).tolist()
     rates = [deg(r) for r in ((4000, 8000) if quick else (3500, 4500, 5500, 7000, 9000, 12000))]
-    phases = [deg(p) for p in ((0, 90) if quick else (0, 45, 90, 135, 180, 270))]
+    phases = [deg(p) for p in ((0, 90) if quick else (0, 90, 180, 270))]
     amps = [0.1 * i_max, 0.25 * i_max] if quick else [0.05 * i_max, 0.1 * i_max, 0.2 * i_max,
                                                        0.35 * i_max]
     g = {

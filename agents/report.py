@@ -18,7 +18,6 @@ smoke-test page into ``runs/`` only.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import sys
@@ -42,6 +41,7 @@ from agents.front import (
     uncut,
     wilson,
 )
+from agents.report_figures import front_figure, learning_curve, speed_figure
 from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
 from hdgym.files import atomic_write_text, check_out
 
@@ -57,11 +57,6 @@ RATING = GEAR_RATINGS["tuttle-joint1"]
 TRAIN_SEED, TEST_SEED = 0, 100_000
 HEADER = ("| variant | rating (N m) | deadline (s) | PPO policy, success (95 % CI) | best tuned "
           "classical family (chosen on training episodes) | its success, held-out (95 % CI) |")
-#: one colour per family in every panel (``<family>+ke`` dashed in its family's colour)
-COLORS = {"const": "tab:blue", "pi": "tab:orange", "pi_ramp": "tab:green", "damp": "tab:red",
-          "damp_full": "tab:purple", "damp_enc": "tab:pink", "two_phase": "tab:brown"}
-#: the figure's deadlines
-FIG_DEADLINES = (1.5, 2.0, 2.5, 3.0)
 
 
 def pct(x: float) -> str:
@@ -95,91 +90,21 @@ def classical_runs(cfg: dict[str, Any], name: str, point: dict[str, float], seed
     return run_batch(c, ctl, seeds)
 
 
+def base_families(front: dict[str, Any]) -> dict[str, Any]:
+    """The families tuned over the whole front (not the KE feedforward, which is tuned on
+    top of the pick at the task's own rating and deadline, so cannot choose them)."""
+    return {k: f for k, f in front["families"].items() if "+" not in k}
+
+
 def deadline_rule(front: dict[str, Any]) -> tuple[float | None, dict[str, float]]:
-    """The shortest deadline at which every family reaches the target in >= 90 % of the
-    training episodes with the torque uncapped (the front's largest cap)."""
+    """The shortest deadline at which every base family reaches the target in >= 90 % of
+    the training episodes with the torque uncapped (the front's largest cap)."""
     j = len(front["caps"]) - 1
     for i, d in enumerate(front["deadlines"]):
-        fr = {k: f["front"][i][j]["train"] for k, f in front["families"].items()}
+        fr = {k: f["front"][i][j]["train"] for k, f in base_families(front).items()}
         if min(fr.values()) >= 0.9:
             return d, fr
     return None, {}
-
-
-def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
-                 out: Path) -> None:
-    """Success against torque cap, one panel per (variant, deadline)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = list(fronts)
-    fig, axes = plt.subplots(len(names), len(FIG_DEADLINES), figsize=(4 * len(FIG_DEADLINES),
-                             3.2 * len(names)), sharex=True, sharey=True, squeeze=False)
-    for r, var in enumerate(names):
-        f = fronts[var]
-        for c, d in enumerate(FIG_DEADLINES):
-            ax = axes[r][c]
-            if d not in f["deadlines"]:
-                ax.set_visible(False)
-                continue
-            i = f["deadlines"].index(d)
-            for fam, v in f["families"].items():
-                base = fam.partition("+")[0]
-                ax.plot(f["caps"], [100 * e["test"] for e in v["front"][i]],
-                        label=label(fam), lw=1.2, color=COLORS.get(base, "tab:gray"),
-                        ls="--" if "+" in fam else "-")
-            if var in pol:
-                p = pol[var]
-                ax.plot(f["caps"], [100 * success(p["time_to_target"], p["peak_torque"], cap,
-                                                  d).mean() for cap in f["caps"]],
-                        "k", lw=2.2, label="PPO policy")
-            ax.axvline(RATING, color="grey", ls=":", lw=1)
-            ax.set_title(f"{var.replace('HarmonicDrive', '')}\ndeadline {d:g} s", fontsize=9)
-            ax.grid(alpha=0.3)
-            if c == 0:
-                ax.set_ylabel("success, held-out (%)")
-            if r == len(names) - 1:
-                ax.set_xlabel("torque cap R (N m)")
-    for row in axes:
-        row[0].legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-
-
-def learning_curve(run: Path | None, out: Path) -> str:
-    """Training success and return against episodes from the run's VecMonitor file."""
-    if run is None or not (run / "monitor" / "native.monitor.csv").is_file():
-        return ""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    text = (run / "monitor" / "native.monitor.csv").read_text().splitlines()
-    rows = list(csv.DictReader(text[1:]))  # line 0 is the monitor's JSON header
-    ret = np.array([float(r["r"]) for r in rows])
-    ok = np.array([r.get("is_success") == "True" for r in rows], dtype=float)
-    t = np.array([float(r["t"]) for r in rows])
-    w = max(len(ret) // 40, 1)
-    k = np.ones(w) / w
-    fig, ax = plt.subplots(1, 2, figsize=(9, 3.2))
-    ax[0].plot(t, ret, ".", ms=2, alpha=0.3)
-    ax[0].plot(t[w - 1:], np.convolve(ret, k, "valid"))
-    ax[0].set(xlabel="wall time (s)", ylabel="episode return")
-    ax[1].plot(t[w - 1:], 100 * np.convolve(ok, k, "valid"))
-    ax[1].set(xlabel="wall time (s)", ylabel=f"success, last {w} episodes (%)")
-    for a in ax:
-        a.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    with (out.with_suffix(".csv")).open("w", newline="") as fh:
-        wr = csv.writer(fh)
-        wr.writerow(["wall_time_s", "episode_return", "success"])
-        wr.writerows(zip(t.round(2), ret.round(3), ok.astype(int), strict=True))
-    return (f"Learning curve: `{out.name}` (training episodes from the run's VecMonitor file; "
-            f"data in `{out.with_suffix('.csv').name}`).")
 
 
 def variant_config(name: str) -> tuple[dict[str, Any], float]:
@@ -199,8 +124,15 @@ def main(argv: list[str] | None = None) -> int:
                     "wall time)")
     ap.add_argument("--episodes", type=int, default=256, help="held-out episodes (default "
                     "%(default)s); training episodes for tuning are half as many")
+    ap.add_argument("--train-episodes", type=int, help="training episodes for the tuning "
+                    "(default: half of --episodes)")
     ap.add_argument("--check-episodes", type=int, default=256,
                     help="episodes of the +-30 %% and beyond-the-horizon checks (0: skip)")
+    ap.add_argument("--fronts", nargs="+", type=Path,
+                    help="fronts written by python -m agents.front --ke 200 2 (one per config) "
+                    "instead of computing them here")
+    ap.add_argument("--note", default="", help="provenance note printed at the top of the page "
+                    "(e.g. where the committed policies were trained)")
     ap.add_argument("--quick", action="store_true", help="small grids and 8 episodes")
     ap.add_argument("--out", type=Path, default=Path("runs/rl"),
                     help="folder to write (default %(default)s; committed: --out results/rl)")
@@ -225,7 +157,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     """Run everything and write the page; returns its markdown."""
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    n_test, n_train = args.episodes, max(args.episodes // 2, 1)
+    n_test = args.episodes
+    n_train = args.train_episodes or max(args.episodes // 2, 1)
     test_seeds = list(range(TEST_SEED, TEST_SEED + n_test))
     train_seeds = list(range(TRAIN_SEED, TRAIN_SEED + n_train))
 
@@ -233,6 +166,13 @@ def build(args: argparse.Namespace, quick: bool) -> str:
         print(msg, file=sys.stderr)
 
     fronts: dict[str, Any] = {}
+    given = {}  # fronts from agents.front, by config name
+    for path in args.fronts or []:
+        f = json.loads(Path(path).read_text())
+        if f["test_seeds"] != [TEST_SEED, n_test] or f["train_seeds"] != [TRAIN_SEED, n_train]:
+            raise ValueError(f"{path}: seeds {f['train_seeds']}/{f['test_seeds']} are not the "
+                             f"report's {[TRAIN_SEED, n_train]}/{[TEST_SEED, n_test]}")
+        given[f["config"]] = f
     pol: dict[str, dict[str, np.ndarray]] = {}
     rows, details = [], []
     summary: dict[str, Any] = {"variants": {}}
@@ -247,6 +187,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
         same = next((v for v in fronts if VARIANTS[v][0] == VARIANTS[var][0]), None)
         if same:
             front = fronts[same]
+        elif VARIANTS[var][0] in given:
+            front = given[VARIANTS[var][0]]
         else:
             front = tune_and_test(cfg, grids, train_seeds, test_seeds, CAPS, DEADLINES, log)
             add_ke(cfg, front, RATING, deadline, 6.0, train_seeds, test_seeds, quick, log)
@@ -296,13 +238,18 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     if args.check_episodes and main_var in pol:
         checks = robustness(main_var, fronts[main_var], args.check_episodes, summary)
     front_figure({k: v for k, v in fronts.items() if VARIANTS[k][2] is None or k == main_var},
-                 pol, out / "front.png")
+                 pol, out / "front.png", RATING)
     d_rule, uncapped = deadline_rule(fronts[main_var])
     i2 = fronts[main_var]["deadlines"].index(DEADLINE)
     best_at = {cap: max(f["front"][i2][fronts[main_var]["caps"].index(cap)]["train"]
-                        for f in fronts[main_var]["families"].values())
+                        for f in base_families(fronts[main_var]).values())
                for cap in (180, 190, 200, 210, 220)}
     oj = other_joints(min(args.check_episodes, 64)) if args.check_episodes else ""
+    sf = ""
+    if main_var in pol:
+        cfg, deadline = variant_config(main_var)
+        sf = speed_figure(main_var, cfg, deadline, POLICIES / VARIANTS[main_var][1],
+                          fronts[main_var], out / "speed_vs_time.png", RATING, TEST_SEED)
     lc = learning_curve(args.run, out / "learning_curve.png")
     train_txt = training_text(args.run) + "\n\n" + speed_text(quick)
     (out / "front.json").write_text(json.dumps(fronts, indent=1) + "\n")
@@ -310,7 +257,9 @@ def build(args: argparse.Namespace, quick: bool) -> str:
                                 "best_train_success_at_2s": best_at}
     (out / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
     md = page(rows, details, checks, d_rule, uncapped, best_at, lc, train_txt, n_test, n_train,
-              quick, oj)
+              quick, oj, sf)
+    if args.note:
+        md = md.replace("\n\n", f"\n\n**Note.** {args.note}\n\n", 1)
     atomic_write_text(out / "evaluation.md", md)
     return md
 
@@ -392,14 +341,19 @@ def other_joints(n: int) -> str:
         reach = np.isfinite(res["time_to_target"]).mean(axis=1)
         peaks = res["peak_torque"].mean(axis=1)
         trapped = [lv for lv, r in zip(levels, reach, strict=True) if r < 0.5]
-        free = bool(reach[-1] >= 0.95 and peaks[-1] <= peaks.max() + 1e-9
-                    and peaks[-1] <= 1.1 * peaks.min() + 1.0)
+        crossing = reach >= 0.95
         verdicts.append(
             f"{name}: trapped (reached in < 50 %) at {', '.join(f'{v:g}' for v in trapped)} A"
             if trapped else f"{name}: no current tried stays trapped")
-        verdicts[-1] += ("; full current crosses in every episode with no more torque than "
-                         "the currents that stay below: no trade-off for a rating"
-                         if free else "; crossing costs torque here")
+        if not crossing[-1]:
+            verdicts[-1] += "; full current does not cross in >= 95 %: no task by a deadline"
+        elif peaks[-1] <= 1.25 * peaks[crossing].min():
+            verdicts[-1] += (f"; full current crosses fastest with a peak of {peaks[-1]:.0f} "
+                             f"N m against {peaks[crossing].min():.0f} N m for the gentlest "
+                             "current that crosses: no torque-time trade-off for a rating")
+        else:
+            verdicts[-1] += (f"; crossing faster costs torque ({peaks[crossing].min():.0f} to "
+                             f"{peaks[-1]:.0f} N m mean peak): a candidate for a rated variant")
     return "\n".join(lines) + "\n\n" + ".\n".join(verdicts) + ".\n"
 
 
@@ -430,21 +384,29 @@ def training_text(run: Path | None) -> str:
 
 def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
          uncapped: dict[str, float], best_at: dict[int, float], lc: str, train_txt: str,
-         n_test: int, n_train: int, quick: bool, oj: str) -> str:
+         n_test: int, n_train: int, quick: bool, oj: str, sf: str) -> str:
     unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in uncapped.items())
     bat = ", ".join(f"{k} N m: {pct(v)}" for k, v in best_at.items())
     head = "**Quick smoke-test run: small grids, few episodes; not a result.**\n\n" if quick \
         else ""
     return f"""# Resonance trap: the learned policy against tuned classical controllers
 
-{head}Regenerate (training about 2 min per policy on the shared machine; the report a few
-minutes):
+{head}Regenerate (each command is independent of the others until the last; training takes
+about 2 min per policy on an idle 2-core machine, each front about 10 min):
 
     python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
     cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
     python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0
     cp runs/resonance_ppo_notorque-s0/final.zip agents/policies/resonance_ppo_notorque.zip
-    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl
+    python -m agents.front --config resonance_ppo --ke 200 2 --train 64 --test 200 \\
+        --out runs/rl/front_resonance_ppo.json
+    python -m agents.front --config resonance_ppo_notorque --ke 200 2 --train 64 --test 200 \\
+        --out runs/rl/front_resonance_ppo_notorque.json
+    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl --episodes 200 \\
+        --train-episodes 64 --check-episodes 200 \\
+        --fronts runs/rl/front_resonance_ppo.json runs/rl/front_resonance_ppo_notorque.json
+
+(`agents.report` without `--fronts` computes the fronts itself.)
 
 The 5-seed study: `hdgym sweep rl --out results/sweeps/rl-run --summary-dir results/sweeps`
 (`results/sweeps/rl.md`).
@@ -461,8 +423,8 @@ and KE amplitude): bring the motor from rest through the 2x-order resonance trap
   1's stiffness test reached 35 % of the drive's rated maximum torque, and that test ended
   at 100 N m, so the rated maximum is about 286 N m; {RATING:.0f} N m is 70 % of it.
   The value was picked from the classical front below: at the 2 s deadline it is where the
-  best tuned classical controller succeeds in about half the training episodes (best
-  training success at caps {bat}).
+  best tuned classical family (before KE feedforward, which is tuned at this point)
+  succeeds in about half the training episodes (best training success at caps {bat}).
 * **Deadline: {DEADLINE:g} s**, the target (speed filtered with 25 ms within 5 %) must be
   reached by then; the episode lasts 3 s, the rating holds for all of it. The deadline is
   the shortest deadline of the front at which every classical family reaches the target in
@@ -501,6 +463,10 @@ deadline; each family's curve is its best training-episode pick at that cap and 
 (so a family's curve may use a different tuning at each point); black: the PPO policy
 (one policy, trained at R = {RATING:.0f} N m, D = {DEADLINE:g} s); dotted: the rating.
 Data: `front.json`.
+
+![speed](speed_vs_time.png)
+
+{sf}
 
 ## How far it carries
 
