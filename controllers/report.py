@@ -58,28 +58,26 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "",
         "What limits the results (from the runs below and the diagnostics behind them):",
         "",
-        "- tuttle-joint1 at 1 WG rev/s: the output moves at 2.2 °/s, about twice the "
-        "preset's output Stribeck velocity (0.02 rad/s), and neither the feedforward nor "
-        "the repetitive controller gets below about 21 arcsec; since the repetitive "
-        "controller removes whatever is periodic in the WG angle at the learnt orders, "
-        "the remainder is not, most likely friction-driven (stick-slip-like) motion. Both "
-        "targets are **not met** there; at 1.5 rev/s both are met.",
-        "- Shifting the motor reference alone (\"KE ref. shift only\") is not enough and "
-        "on tuttle-joint3 makes things worse: the kinematic error also feeds the "
-        "transmitted torque back to the motor (T_k θ_ke', docs/physics.md eqs. (2) and "
-        "(11)), and the "
-        "motor loop, whose bandwidth the lightly damped resonance limits, cannot follow "
-        "the shifted reference without the torque and motor-only inertia terms.",
-        "- The KE feedforward's wind-up term is a constant identified at one speed and "
-        "load; the output friction ripple (once per output revolution) changes the "
-        "wind-up along the run, which is the slowly drifting offset left in the "
-        "feedforward trace. Feeding the torque sensor through the identified compliance "
-        "instead was tried and made tracking worse (the correction changes the torque it "
-        "is computed from).",
+        "- Since the previous page the transmission friction acts in the mesh "
+        "(`friction.placement = \"mesh\"`, Tuttle §3 models 2 and 5): the flexspline "
+        "torque, and so the torque sensor, no longer carries it. tuttle-joint1's torque "
+        "constant (0.054 → 0.0565 N m/A) and torsional damping (4.7 → 8 N m s/rad) were "
+        "recalibrated with it (the presets' sources say how). Nearly every number moved; "
+        "the table at the end of the page lists the largest changes.",
+        "- The repetitive controller meets its target on both joints at both speeds, "
+        "tuttle-joint1 at 1 WG rev/s included (the previous physics held it near 21 "
+        "arcsec there). The KE feedforward misses its target on both joints. On "
+        "tuttle-joint1, shifting the motor reference alone now does better than adding "
+        "the wind-up and torque terms; those terms take the flexspline torque from the "
+        "sensor, which no longer includes the transmission friction (not investigated "
+        "further: the feedforward was designed on the previous physics and not retuned).",
+        "- With the DOB both joints fall into a stick-slip limit cycle after the load step "
+        "(load-step figures: the output hops between two friction holds about once a "
+        "second while the current swings over most of its range), so the DOB never "
+        "recovers faster than the PID alone. The PID alone is held by static friction "
+        "after the step until its integral action frees the output.",
         "- After a load step the output keeps the flexspline wind-up (ΔT/k) that a "
-        "motor-side loop cannot see; on tuttle-joint3 the PID alone also stays where "
-        "static friction catches the output (recovery to its own final value is quick, "
-        "but that final value is the peak deviation).",
+        "motor-side loop cannot see.",
         "",
     ]
     for name, res in results.items():
@@ -213,12 +211,13 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             lines.append(f"| {k} | {m['overshoot_pct']:.2f} | {m['settling_time']:.3f} | "
                          f"{m['peak_current']:.3g} | {m['final_error'] * as_:.1f} | "
                          f"{m['chatter']:.3g} |")
+        never = [k for k, m in pp["metrics"].items() if math.isinf(m["settling_time"])]
         lines += [
             "",
-            "Settling time inf: the output never stays inside the band (with the PID alone "
-            "on tuttle-joint3 static friction stops it outside, and the weak integral "
-            "action does not free it within the run). A negative value means it settled "
-            "before the reference move ended.",
+            ("Settling time inf: the output never stays inside the band within the run "
+             f"({', '.join(never)}; static friction stops it outside and the integral "
+             "action does not free it in time). " if never else "")
+            + "A negative value means it settled before the reference move ended.",
         ]
         lines += [
             "",

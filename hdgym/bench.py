@@ -14,6 +14,7 @@ imports none of those packages itself.
 
 from __future__ import annotations
 
+import os
 import platform
 import time
 from collections.abc import Callable
@@ -164,16 +165,28 @@ def _fmt(v: float) -> str:
     return f"{v:,.0f}" if v >= 100 else f"{v:.3g}"
 
 
+def _load() -> str:
+    """The 1-minute load average against the cores (other jobs slow the absolute rates)."""
+    try:
+        return f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+    except OSError:  # pragma: no cover - no load average on this platform
+        return "unknown"
+
+
 def write_report(tables: dict[str, list[dict]], path: Path, command: str,
-                 not_measured: dict[str, str] | None = None) -> None:
+                 not_measured: dict[str, str] | None = None,
+                 load: tuple[str, str] | None = None) -> None:
     """Write the bench tables as markdown (atomically); ``not_measured`` names the entry
-    points whose sections could not be loaded, and why."""
+    points whose sections could not be loaded, and why; ``load`` is the machine's load
+    average at the start and at the end of the run."""
     lines = [
         "# hdgym benchmarks", "",
         f"Regenerate with `{command}`. Machine: {platform.machine()}, "
         f"{nb.config.NUMBA_NUM_THREADS} numba threads, Python {platform.python_version()}, "
         f"numba {nb.__version__}, numpy {np.__version__}. Every ratio is against a reference "
-        "measured in the same run.", "",
+        "measured in the same run."
+        + (f" Load average {load[0]} at the start, {load[1]} at the end: other jobs on the "
+           "machine lower the absolute rates more than the ratios." if load else ""), "",
     ]
     lines += [f"Not measured: the sections of `{name}` ({why})." for name, why in
               (not_measured or {}).items()] + ([""] if not_measured else [])
@@ -238,9 +251,11 @@ def run(quick: bool = False, out: Path = Path("results/bench.md"),
         soak: bool = False) -> dict[str, list[dict]]:
     """Run every registered section and write the report (``soak`` adds the long soak runs)."""
     registered, failed = sections()
+    load_start = _load()
     tables = {sec.title: sec.fn(quick) for sec in bar(registered, "bench", unit="section")}
     if soak:
         tables["Soak (issue: long runs)"] = bench_soak(quick)
     write_report(tables, out, "hdgym bench" + (" --quick" if quick else "")
-                 + (" --soak" if soak else "") + f" --out {out}", not_measured=failed)
+                 + (" --soak" if soak else "") + f" --out {out}", not_measured=failed,
+                 load=(load_start, _load()))
     return tables

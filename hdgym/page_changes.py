@@ -100,7 +100,7 @@ def _fmt(v: float) -> str:
 def _change(before: float, after: float) -> tuple[float, str]:
     if math.isnan(before) or math.isnan(after) or math.isinf(before) or math.isinf(after):
         return math.inf, "—"
-    if before == 0:
+    if abs(before) <= 1e-9 * abs(after):  # from zero (or rounding noise): no ratio
         return math.inf, f"{after - before:+.3g}"
     rel = (after - before) / abs(before)
     return abs(rel), f"{100 * rel:+.3g} %"

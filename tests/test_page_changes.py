@@ -60,3 +60,28 @@ def test_moved_section_names_each_change_and_survives_its_own_rerun(tmp_path: Pa
     assert "| where |" not in again
     assert moved_section(tmp_path / "missing.md", after) == ""
     assert moved_section(None, after) == ""
+
+
+def test_bench_page_names_load_missing_sections_and_what_moved(tmp_path: Path) -> None:
+    from hdgym.bench import write_report
+
+    page = tmp_path / "bench.md"
+    row = {"name": "physics, 1 env", "value": 1000.0, "unit": "env-steps/s",
+           "reference": "bare loop", "reference_value": 2000.0, "ratio": 0.5, "target": "",
+           "met": None}
+    write_report({"Physics": [row]}, page, "hdgym bench", load=("0.5 on 2 cores", "1.0 on 2 cores"))
+    first = page.read_text()
+    assert "Load average 0.5 on 2 cores at the start, 1.0 on 2 cores at the end" in first
+    assert "What moved" not in first  # nothing to compare with yet
+    write_report({"Physics": [{**row, "value": 1500.0, "ratio": 0.75}]}, page, "hdgym bench",
+                 not_measured={"agents": "cannot import agents.bench (ImportError: no SB3)"})
+    second = page.read_text()
+    assert "Not measured: the sections of `agents` (cannot import agents.bench" in second
+    assert "| Physics | physics, 1 env · bare loop | value | 1000 | 1500 | +50 % |" in second
+    assert "| Physics | physics, 1 env · bare loop | ratio | 0.5 | 0.75 | +50 % |" in second
+
+
+def test_a_change_from_zero_or_rounding_noise_is_given_as_a_difference() -> None:
+    page = "## S\n\n| m | std |\n|---|---|\n| a | {} |\n"
+    sec = moved_section(page.format("1.17e-16"), page.format("0.01667"))
+    assert "| S | a | std | 1.17e-16 | 0.01667 | +0.0167 |" in sec
