@@ -1,5 +1,9 @@
 """Write ``results/rl/``: the learned policy against the tuned classical controllers.
 
+Long because: the page is one argument (families, fronts, variants, drive spread,
+beyond-horizon check) written in the order a reader follows it; the figures live in
+agents/report_figures.py.
+
     python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
     cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
     python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0

@@ -1,5 +1,8 @@
 """Record: the measured or simulated time series of one run, with CSV in/out.
 
+Long because: the CSV reader's checks (one clear error per bad file, row and column)
+sit beside the format they check, so the whole contract of a record reads in one place.
+
 A record is a CSV file: optional leading metadata lines ``# key: value``, one
 header row naming the columns, then one row per sample at a uniform ``time``
 step. Everything is SI (s, rad, rad/s, A, N m)::

@@ -1,4 +1,8 @@
-"""Discrepancy workflow: registry, experiments, hidden-effect cases, reports, bad input."""
+"""Discrepancy workflow: registry, experiments, hidden-effect cases, reports, bad input.
+
+Long because: one test file per package keeps the workflow's cases, outcomes and
+bad-input checks together; the package's modules each have their tests here.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,8 @@
-"""Record: CSV round trip and one clear RecordError per bad input."""
+"""Record: CSV round trip and one clear RecordError per bad input.
+
+Long because: one test per kind of bad record (missing column, NaN, time order,
+units, metadata), each naming the file, row and column it expects.
+"""
 
 from __future__ import annotations
 

@@ -212,6 +212,11 @@ def layout_problems() -> list[str]:
     return out
 
 
+def test_no_long_file_without_a_reason() -> None:
+    """No .py file over MAX_LINES lines unless its docstring says why (a "Long because:" line)."""
+    assert not long_files(), "\n".join(long_files())
+
+
 def test_readme_layout_matches_the_tree() -> None:
     problems = layout_problems()
     assert not problems, "README.md, ## Layout:\n" + "\n".join(problems)

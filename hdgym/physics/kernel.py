@@ -1,6 +1,6 @@
 """The compiled joint step (numba), one env at a time: docs/physics.md eqs. (1)-(13).
 
-Over 500 lines on purpose: the substep and the helpers numba inlines into it stay
+Long because: the substep and the helpers numba inlines into it stay
 in one file, so a reader sees the whole step beside the equations it cites.
 
 One substep is semi-implicit (symplectic) Euler on the two-inertia joint:
