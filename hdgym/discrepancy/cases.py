@@ -287,9 +287,17 @@ def main(argv: list[str] | None = None) -> int:
         "for 30 ms), so a model that breaks away too early or too late still shows it, and a "
         "small speed or phase error cannot build up into a drift no effect explains. The "
         "horizon is chosen per record: the longest of 0.5, 0.2, 0.1, 0.05 and 0.025 s whose "
-        "NMSE with the given model stays within 1.5 x the lowest "
-        "(`hdgym.discrepancy.problem.Problem.choose_horizon`). Locked-output records restart "
-        "too (the motor angle and speed; the output stays clamped).",
+        "NMSE with the fitted base model stays within 1.5 x the lowest "
+        "(`hdgym.discrepancy.problem.Problem.choose_horizon`), and chosen again with the "
+        "model each time an effect is added (the base model may have needed a short horizon "
+        "only because it lacked the effect). When nothing is found at the chosen horizon, the "
+        "two shortest longer horizons on which the model drifts (NMSE above 1.5 x its NMSE "
+        "at the chosen one) are searched too (`hdgym.discrepancy.workflow._escalate`): an "
+        "effect that acts over longer stretches than the horizon (a friction ripple once per "
+        "output turn slowly changes the speed) is exactly such a drift; before and after are "
+        "then reported on that horizon. Trial refits also start from a Gauss-Newton step of "
+        "the ranking's linearized refit (order lines start at zero amplitude). Locked-output "
+        "records restart too (the motor angle and speed; the output stays clamped).",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "
         "of speeds, the torsion, high or transmitted torque). An effect the record cannot "
@@ -297,7 +305,8 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym experiment ...`) whose record would show it; so is one that, at the size the "
         "record suggests, would change the channels by less than their measurement noise. "
         "*Outcome* is *named*, *nothing missing* (final NMSE within 3 x the measurement-noise "
-        "NMSE or at most 0.5 %) or *unexplained*.",
+        "NMSE, or at most 0.5 % while no candidate explains 3 % of it) or *unexplained*; a "
+        "named effect that leaves more than that is *named; rest unexplained*.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "
         "from the measured state, event by event; the ringing at each stop no longer decides "

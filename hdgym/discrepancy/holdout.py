@@ -16,10 +16,12 @@ present in that record (a preset may give it no size at all), and then nothing m
 
 A case *hits* when the hidden effect is named first and the validation NMSE falls by at least
 80 %, or, with nothing (present) hidden, when nothing is named and the outcome is not
-"unexplained". A miss is *honest* when the outcome says "unexplained" or lists the hidden
+"unexplained". A miss is *honest* when the outcome says "unexplained" (also "named; rest
+unexplained": a named effect left a residual above the noise level) or lists the hidden
 effect as untestable rather than "nothing missing".
 
-``python -m hdgym.discrepancy.holdout [--quick] [--only NAME ...] [--out FILE.md]``
+``python -m hdgym.discrepancy.holdout [--quick] [--set blind|holdout|both] [--seed N]
+[--only NAME ...] [--out FILE.md]`` (``--seed`` other than 14 draws a development set).
 (nothing is written without ``--out``).
 """
 
@@ -122,7 +124,11 @@ def _command(kind: str, imax: float, rng: np.random.Generator) -> tuple[str, boo
     raise ValueError(f"unknown excitation {kind!r}")
 
 
-def holdout_cases(seed: int = 14) -> list[Blind]:
+HOLDOUT_SEED = 14
+"""Seed of the reported hold-out set (other seeds draw development sets)."""
+
+
+def holdout_cases(seed: int = HOLDOUT_SEED) -> list[Blind]:
     """Every effect on two presets drawn at random, excitations drawn, base 2-5 % off."""
     rng = np.random.default_rng(seed)
     names = [n for n in preset_names()]
@@ -244,7 +250,7 @@ class Result:
             return True
         if not self.present:  # nothing (visible) hidden: naming an effect is not honest
             return not d.missing_effects
-        return d.outcome == "unexplained" or self.case.hidden in d.untestable
+        return d.outcome.endswith("unexplained") or self.case.hidden in d.untestable
 
 
 def run(case: Blind, quick: bool = False) -> Result:
@@ -306,12 +312,17 @@ def page_section(quick: bool = False) -> str:
              "A case *hits* when the hidden effect is named first and the validation NMSE "
              "falls by >= 80 % (nothing present hidden: nothing named and not \"unexplained\"); a "
              "miss is "
-             "*honest* when the outcome is \"unexplained\" or the hidden effect is listed "
+             "*honest* when the outcome says \"unexplained\" or the hidden effect is listed "
              "as untestable on the record. Outcomes: *named*; *nothing missing* when the final "
-             f"NMSE is within {NOISE_FACTOR:g} x the measurement-noise NMSE or at most "
-             f"{RESOLVED:g} % (`hdgym.discrepancy.outcome.NOISE_FACTOR`, `RESOLVED`, set on the "
-             "tuned cases); *unexplained* otherwise. The prediction horizon is chosen per record "
-             "(`hdgym.discrepancy.problem.Problem.choose_horizon`). These cases run the "
+             f"NMSE is within {NOISE_FACTOR:g} x the measurement-noise NMSE, or at most "
+             f"{RESOLVED:g} % while no candidate of the last ranking explains 3 % of it "
+             "(`hdgym.discrepancy.outcome.NOISE_FACTOR`, `RESOLVED`, set on the tuned cases); "
+             "*unexplained* otherwise (*named; rest unexplained* when an effect was named but "
+             "what remains is above that level). The prediction horizon is chosen per record "
+             "and again after each effect added, and longer horizons on which the model drifts "
+             "are searched when nothing is found at it "
+             "(`hdgym.discrepancy.problem.Problem.choose_horizon`, "
+             "`hdgym.discrepancy.workflow._escalate`). These cases run the "
              "workflow's quick fit settings (fewer least-squares iterations), so the 31 "
              "full-preset diagnoses fit in one run of the page's command.", ""]
     sets = [("Blind (issue 14)", list(BLIND))]
@@ -337,10 +348,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", choices=["blind", "holdout", "both"], default="both")
     ap.add_argument("--only", nargs="*", help="case names (as printed) to run")
     ap.add_argument("--out", default=None, help="write the tables (markdown) here")
+    ap.add_argument("--seed", type=int, default=HOLDOUT_SEED,
+                    help="draw the hold-out cases with this seed (default %(default)s: the "
+                    "reported set; any other: a development set to tune on)")
     args = ap.parse_args(argv)
     if args.out:
         check_out(args.out, args.quick)
-    sets = {"blind": list(BLIND), "holdout": holdout_cases()}
+    sets = {"blind": list(BLIND), "holdout": holdout_cases(args.seed)}
     chosen = ["blind", "holdout"] if args.set == "both" else [args.set]
     text = []
     for which in chosen:

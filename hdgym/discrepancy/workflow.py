@@ -20,7 +20,9 @@ NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
 
 The comparison is short-horizon prediction: the model restarts from the measured state every
-horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`).
+horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`)
+and again after each effect added; when nothing is found, the longer horizons on which the
+model drifts are searched too (:func:`_escalate`).
 Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
 list); the rest are listed as untestable with what the record lacks. The outcome is one of
 *named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
@@ -46,7 +48,7 @@ from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
 from .outcome import outcome_of
 from .paths import get_value, set_values
-from .problem import Problem
+from .problem import DRIFT, Problem
 from .registry import REGISTRY, model_params
 
 THRESHOLD = 0.4
@@ -69,6 +71,8 @@ SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
 """Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
 FIRST_HORIZON = 0.05
 """Prediction horizon, s, of the base fit before the record's own is chosen."""
+ESCALATE = 2
+"""Longer horizons :func:`_escalate` searches when nothing is found at the chosen one."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
 
@@ -82,18 +86,48 @@ def _stack(problem: Problem, d: dict[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([d[k] / math.sqrt(problem.sigma2[k] * d[k].size) for k in problem.names])
 
 
-def _columns(problem: Problem, p: JointParams, fps, ref: np.ndarray) -> list[np.ndarray]:
-    """Finite-difference columns of the stacked residual in each of ``fps`` (5 % of range)."""
+def _columns(problem: Problem, p: JointParams, fps, ref: np.ndarray
+             ) -> list[tuple[str, float, np.ndarray]]:
+    """Finite-difference columns of the stacked residual in each of ``fps`` (5 % of range):
+    ``(path, step, column)`` for each parameter whose perturbed run succeeded."""
     cols = []
     for fp in fps:
         v = get_value(p, fp.path)
         h = 0.05 * (fp.upper - fp.lower) or 1e-9
         h = h if v + h <= fp.upper else -h
         try:
-            cols.append(_stack(problem, problem.residuals(_set(p, fp.path, v + h))) - ref)
+            cols.append((fp.path, h,
+                         _stack(problem, problem.residuals(_set(p, fp.path, v + h))) - ref))
         except (SimulationError, ValueError):
             continue
     return cols
+
+
+def _newton_start(problem: Problem, q: JointParams, on: np.ndarray,
+                  cols: list[tuple[str, float, np.ndarray]], fps) -> JointParams | None:
+    """One Gauss-Newton step from ``q`` (the candidate on at its start, residual ``on``)
+    over the columns ``cols`` (base parameters at the current fit, the candidate's at ``q``),
+    clipped to the bounds: a start for the trial refit where the candidate's parameters
+    enter smoothly (order lines start at zero amplitude; a long horizon couples them to the
+    friction level the base fit shifted to mimic their mean)."""
+    if not cols:
+        return None
+    X = np.column_stack([c for _, _, c in cols])
+    scale = np.linalg.norm(X, axis=0)
+    ok = scale > 1e-300
+    if not ok.any():
+        return None
+    beta = np.zeros(X.shape[1])
+    beta[ok] = np.linalg.lstsq(X[:, ok] / scale[ok], -on, rcond=None)[0] / scale[ok]
+    bounds = {fp.path: (fp.lower, fp.upper) for fp in fps}
+    vals = {}
+    for (path, h, _), b in zip(cols, beta, strict=True):
+        lo, hi = bounds.get(path, (-math.inf, math.inf))
+        vals[path] = min(max(get_value(q, path) + b * h, lo), hi)
+    try:
+        return set_values(q, vals)
+    except ValueError:
+        return None
 
 
 def _set(p: JointParams, path: str, value: float) -> JointParams:
@@ -120,8 +154,10 @@ def rank_candidates(problem: Problem, current: JointParams,
     r0 = _stack(problem, res)
     _, w = _weighted(problem, res)
     ctx = problem.masked_context()
-    base_cols = _columns(problem, current, model_params(current, problem.scales, anchor), r0)
-    base_frac = R._lstsq_explained(-r0, np.column_stack(base_cols))[0] if base_cols else 0.0
+    base_fps = model_params(current, problem.scales, anchor)
+    base_cols = _columns(problem, current, base_fps, r0)
+    base_frac = (R._lstsq_explained(-r0, np.column_stack([c for *_, c in base_cols]))[0]
+                 if base_cols else 0.0)
     out = []
     for name, eff in REGISTRY.items():
         if name in current.effects or not eff.testable(problem.scales):
@@ -131,6 +167,7 @@ def rank_candidates(problem: Problem, current: JointParams,
         sig = R.signature(eff.signature, res, w, ctx)
         sens = 0.0
         size = math.nan
+        newton = None
         try:  # how much the effect, at the size the record suggests, changes the channels
             d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
             size = 100.0 * float(d0 @ d0) / len(problem.names)
@@ -140,17 +177,19 @@ def rank_candidates(problem: Problem, current: JointParams,
             q = _start(problem, current, name)
             on = _stack(problem, problem.residuals(q))
             start_gain = 1.0 - float(on @ on) / max(float(r0 @ r0), 1e-300)
-            cols = base_cols + [on - r0] + _columns(problem, q, eff.fit_params(q, problem.scales),
-                                                    on)
+            own_fps = eff.fit_params(q, problem.scales)
+            own = _columns(problem, q, own_fps, on)
+            cols = [c for *_, c in base_cols] + [on - r0] + [c for *_, c in own]
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
+            newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
         except (SimulationError, ValueError):
             pass
         out.append({"name": name, "signature": eff.signature,
                     "signature_explained": round(sig["explained"], 4),
                     "sensitivity_explained": round(sens, 4),
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
-                    "size_nmse": size})
+                    "size_nmse": size, "_newton": newton})
     out.sort(key=lambda c: -c["score"])
     return out
 
@@ -228,13 +267,16 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     # where stick-slip makes the cost at a start a poor guide, the better of both fits
     q = _start(problem, current.params, cand["name"])
     q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
+    starts = [(problem.nmse(s)["mean"], k, s) for k, s in enumerate((q, q2))]
+    q3 = cand.get("_newton")  # a Gauss-Newton step from the ranking (see _newton_start)
+    if q3 is not None and (c3 := problem.nmse(q3)["mean"]) < min(c for c, *_ in starts):
+        starts.append((c3, 2, q3))
     if problem.stick_slip:
         fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
-                for s in (q, q2)]
+                for *_, s in starts]
         res = min(fits, key=lambda f: f.cost)
     else:
-        if problem.nmse(q2)["mean"] < problem.nmse(q)["mean"]:
-            q = q2
+        q = min(starts, key=lambda t: t[:2])[2]
         res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
     rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
     cand["trial_nmse"] = res.nmse["mean"]
@@ -274,6 +316,114 @@ def _reset(p: JointParams, given: JointParams, paths: list[str]) -> JointParams:
 
 def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
     return None if vp is None else vp.nmse(p)
+
+
+def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
+            base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
+            ) -> tuple[tuple | None, str, list[dict]]:
+    """One round: rank the candidates, trial-refit the best, accept the first that passes.
+
+    Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
+    relative improvement)`` or None, ``reason`` why nothing passed.
+    """
+    params = given
+    candidates = rank_candidates(problem, current.params, params)
+    if not candidates:
+        return None, "every testable effect is already in the model", candidates
+    trials = []
+    top = candidates[0]["score"]
+    if top < MIN_SCORE:
+        return None, (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
+                      f"% of the residual in a linearized refit (best: "
+                      f"{candidates[0]['name']}, {100 * top:.1f} %)"), candidates
+    for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
+        trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
+    trials.sort(key=lambda t: t[0])
+    # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
+    # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
+    simpler = NESTED.get(trials[0][1]["name"])
+    by_name = {c["name"]: c for c in candidates}
+    if simpler in by_name:
+        if "relative_improvement" not in by_name[simpler]:
+            trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
+                                 nfev_trial))
+        k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
+        if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
+            trials.insert(0, trials.pop(k))
+    accepted = None
+    reasons = []
+    for _, best, res in trials:  # the best candidate that passes every check
+        rel = best["relative_improvement"]
+        gain = current.nmse["mean"] - res.nmse["mean"]
+        if rel < threshold or gain < MIN_GAIN:
+            reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
+                           f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
+                           f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+            continue
+        polished = fit(problem, res.params,
+                       model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
+                       search=True)
+        if polished.cost > res.cost:
+            polished = res
+        if vprob is not None:
+            # hold-out check: an effect that fits the training record better but does not
+            # carry over to the validation record fits noise or the fit's slack; per
+            # channel and scale-free (geometric mean of the NMSE ratios), so a channel
+            # with a tiny variance cannot decide alone
+            v_now = vprob.nmse(current.params)
+            v_new = vprob.nmse(polished.params)
+            ratios = [v_new[k] / v_now[k] for k in vprob.names
+                      if v_now[k] > 0 and math.isfinite(v_now[k])]
+            ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
+                     if ratios else 1.0)
+            if not ratio <= 1.0 - VALIDATION_GAIN:
+                reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
+                               f"but the validation NMSE only by a factor {ratio:.2f} per "
+                               f"channel (geometric mean; needs <= "
+                               f"{1 - VALIDATION_GAIN:.2f})")
+                continue
+        accepted = (best, polished, rel)
+        break
+    if accepted is None:
+        return None, "nothing (more) worth adding: " + "; ".join(reasons), candidates
+    return accepted, "", candidates
+
+
+def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
+              base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
+              ) -> tuple[tuple, list[dict], FitResult] | None:
+    """Search again at the longer horizons on which ``current`` drifts.
+
+    The horizon is chosen with the base model (:meth:`.problem.Problem.choose_horizon`): the
+    longest on which it does not drift. A missing effect that acts over longer stretches than
+    that (a friction ripple over an output turn changes the speed slowly) is exactly such a
+    drift, and the short horizon hides it. So when nothing is found at the chosen horizon,
+    the longer horizons on which the current model's NMSE exceeds :data:`.problem.DRIFT` x its
+    NMSE at the chosen one are searched too (the :data:`ESCALATE` shortest of them: on the
+    longest ones the fit of a drifting model is rough); an effect found there must pass the
+    same checks, and the diagnosis then stays at that horizon (before and after are both
+    reported on it). Returns ``(accepted, candidates, current at that horizon)`` or None
+    (the horizon is left as it was).
+    """
+    h0 = problem.segment
+    base = problem.nmse(current.params)["mean"]
+    costs = getattr(problem, "horizons", {})
+    longer = [h for h in sorted(costs) if h > h0 and costs[h] > DRIFT * base]
+    tried = longer[:ESCALATE]
+    for h in tried:
+        problem.segment = h
+        if vprob is not None:
+            vprob.segment = h
+        nm = problem.nmse(current.params)
+        cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+        accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
+                                          nfev_trial, nfev_polish)
+        if accepted is not None:
+            return accepted, candidates, cur
+    problem.segment = h0
+    if vprob is not None:
+        vprob.segment = h0
+    return None
 
 
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
@@ -329,6 +479,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nm = problem.nmse(before.params)
         before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     current = before
+    chosen = problem.segment
     prog.update(1)
     steps: list[Step] = []
     conclusion = ""
@@ -344,67 +495,18 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                 control.nmse, control.nfev, control.cost)
             if not steps:
                 before = current
-        candidates = rank_candidates(problem, current.params, params)
-        if not candidates:
-            conclusion = "every testable effect is already in the model"
-            break
-        trials = []
-        top = candidates[0]["score"]
-        if top < MIN_SCORE:
-            conclusion = (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
-                          f"% of the residual in a linearized refit (best: "
-                          f"{candidates[0]['name']}, {100 * top:.1f} %)")
-            break
-        for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
-            trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
-        trials.sort(key=lambda t: t[0])
-        # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
-        # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
-        simpler = NESTED.get(trials[0][1]["name"])
-        by_name = {c["name"]: c for c in candidates}
-        if simpler in by_name:
-            if "relative_improvement" not in by_name[simpler]:
-                trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
-                                     nfev_trial))
-            k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
-            if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
-                trials.insert(0, trials.pop(k))
-        accepted = None
-        reasons = []
-        for _, best, res in trials:  # the best candidate that passes every check
-            rel = best["relative_improvement"]
-            gain = current.nmse["mean"] - res.nmse["mean"]
-            if rel < threshold or gain < MIN_GAIN:
-                reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
-                               f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
-                               f"{gain:.3g} points (threshold {MIN_GAIN:g})")
-                continue
-            polished = fit(problem, res.params,
-                           model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
-                           search=True)
-            if polished.cost > res.cost:
-                polished = res
-            if vprob is not None:
-                # hold-out check: an effect that fits the training record better but does not
-                # carry over to the validation record fits noise or the fit's slack; per
-                # channel and scale-free (geometric mean of the NMSE ratios), so a channel
-                # with a tiny variance cannot decide alone
-                v_now = vprob.nmse(current.params)
-                v_new = vprob.nmse(polished.params)
-                ratios = [v_new[k] / v_now[k] for k in vprob.names
-                          if v_now[k] > 0 and math.isfinite(v_now[k])]
-                ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
-                         if ratios else 1.0)
-                if not ratio <= 1.0 - VALIDATION_GAIN:
-                    reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
-                                   f"but the validation NMSE only by a factor {ratio:.2f} per "
-                                   f"channel (geometric mean; needs <= "
-                                   f"{1 - VALIDATION_GAIN:.2f})")
-                    continue
-            accepted = (best, polished, rel)
-            break
+        accepted, reason, candidates = _search(problem, vprob, current, params, base_paths,
+                                               threshold, nfev_trial, nfev_polish)
+        if accepted is None and auto and not problem.inverse:
+            # nothing at the chosen horizon: an effect that acts over longer stretches (a
+            # friction ripple over an output turn, a slow speed change) shows as the drift
+            # that made the short horizon the choice; look where the current model drifts
+            found = _escalate(problem, vprob, current, params, base_paths, threshold,
+                              nfev_trial, nfev_polish)
+            if found is not None:
+                accepted, candidates, current = found
         if accepted is None:
-            conclusion = "nothing (more) worth adding: " + "; ".join(reasons)
+            conclusion = reason
             break
         best, polished, rel = accepted
         eff = REGISTRY[best["name"]]
@@ -428,10 +530,24 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                           (current.cost - polished.cost) / current.cost, candidates,
                           polished.params))
         current = polished
+        if auto and not problem.inverse:
+            # the horizon again, with the model that now has the effect: the base model may
+            # have needed a short one (or allowed a long one) only because it lacked it
+            h_prev = problem.segment
+            problem.choose_horizon(current.params)
+            if vprob is not None:
+                vprob.segment = problem.segment
+            if problem.segment != h_prev:
+                nm = problem.nmse(current.params)
+                current = FitResult(current.params, current.values, nm, current.nfev,
+                                    nm["mean"] / 100)
         prog.update(1)
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
     prog.close()
+    if before.nmse is not None and problem.segment != chosen:  # escalated: report on it
+        nm = problem.nmse(before.params)
+        before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
@@ -445,7 +561,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                              untestable_why, params)
+                                untestable_why, params, MIN_SCORE)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
