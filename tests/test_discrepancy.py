@@ -570,3 +570,10 @@ def test_holdout_scoring_counts_honest_misses():
     absent = res("stiction", "nothing missing", [], size=0.0)
     assert not absent.present and absent.hit
     assert not res("stiction", "named", ["viscous_friction"], size=0.0).honest
+
+
+def test_ordered_map_keeps_the_order_in_worker_processes():
+    from hdgym.discrepancy.pool import ordered_map
+
+    assert list(ordered_map(abs, [-1, 2, -3], jobs=2)) == [1, 2, 3]
+    assert list(ordered_map(abs, [-4], jobs=2)) == [4]

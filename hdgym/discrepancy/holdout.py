@@ -31,6 +31,7 @@ import argparse
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -42,6 +43,7 @@ from hdgym.sim import Simulator
 from .diagnosis import Diagnosis
 from .effect import Scales
 from .paths import get_value, set_values
+from .pool import ordered_map
 from .registry import REGISTRY, core_params
 
 DURATION = 6.0
@@ -291,11 +293,12 @@ def summary(results: list[Result]) -> str:
             f"({100 * honest / max(n, 1):.0f} %).")
 
 
-def page_section(quick: bool = False) -> str:
+def page_section(quick: bool = False, jobs: int = 1) -> str:
     """The blind and hold-out sections of results/discrepancy.md (runs every case).
 
     Every case runs the workflow's quick fit settings (fewer least-squares iterations:
-    31 full-preset diagnoses in one page run); ``quick`` runs the blind cases only.
+    31 full-preset diagnoses in one page run); ``quick`` runs the blind cases only; ``jobs``
+    worker processes (:func:`.pool.ordered_map`).
     """
     from .outcome import NOISE_FACTOR, RESOLVED
 
@@ -332,8 +335,7 @@ def page_section(quick: bool = False) -> str:
         sets.append(("Hold-out", holdout_cases()))
     for title, cases in sets:
         results = []
-        for c in cases:
-            r = run(c, quick=True)
+        for c, r in zip(cases, ordered_map(partial(run, quick=True), cases, jobs), strict=True):
             print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
                   f", hit {r.hit} ({r.seconds:.1f} s)", flush=True)
             results.append(r)
@@ -348,6 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--set", choices=["blind", "holdout", "both"], default="both")
     ap.add_argument("--only", nargs="*", help="case names (as printed) to run")
     ap.add_argument("--out", default=None, help="write the tables (markdown) here")
+    ap.add_argument("--jobs", type=int, default=1, help="cases at once (worker processes)")
     ap.add_argument("--seed", type=int, default=HOLDOUT_SEED,
                     help="draw the hold-out cases with this seed (default %(default)s: the "
                     "reported set; any other: a development set to tune on)")
@@ -359,10 +362,9 @@ def main(argv: list[str] | None = None) -> int:
     text = []
     for which in chosen:
         results = []
-        for c in sets[which]:
-            if args.only and c.name not in args.only:
-                continue
-            r = run(c, quick=args.quick)
+        chosen_cases = [c for c in sets[which] if not args.only or c.name in args.only]
+        for c, r in zip(chosen_cases, ordered_map(partial(run, quick=args.quick), chosen_cases,
+                                                  args.jobs), strict=True):
             print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
                   f", NMSE {r.diagnosis.nmse_before:.3g} -> {r.diagnosis.nmse_after:.3g} %, hit "
                   f"{r.hit} ({r.seconds:.1f} s)", flush=True)

@@ -46,9 +46,9 @@ from hdgym.sim import SimulationError
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .outcome import outcome_of
+from .outcome import NOISE_FACTOR, outcome_of
 from .paths import get_value, set_values
-from .problem import DRIFT, Problem
+from .problem import DRIFT, HORIZONS, Problem
 from .registry import REGISTRY, model_params
 
 THRESHOLD = 0.4
@@ -73,6 +73,10 @@ FIRST_HORIZON = 0.05
 """Prediction horizon, s, of the base fit before the record's own is chosen."""
 ESCALATE = 2
 """Longer horizons :func:`_escalate` searches when nothing is found at the chosen one."""
+ESCALATED_GAIN = 0.5
+"""At a longer horizon (:func:`_escalate`) an effect must cut the validation NMSE by half:
+the base model drifts there, and the effect must remove most of that drift (a small gain
+on a drifting comparison is what any extra parameter buys)."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
 
@@ -107,9 +111,10 @@ def _newton_start(problem: Problem, q: JointParams, on: np.ndarray,
                   cols: list[tuple[str, float, np.ndarray]], fps) -> JointParams | None:
     """One Gauss-Newton step from ``q`` (the candidate on at its start, residual ``on``)
     over the columns ``cols`` (base parameters at the current fit, the candidate's at ``q``),
-    clipped to the bounds: a start for the trial refit where the candidate's parameters
-    enter smoothly (order lines start at zero amplitude; a long horizon couples them to the
-    friction level the base fit shifted to mimic their mean)."""
+    clipped to the bounds: a start for the trial refit of order-line candidates (kinematic
+    error, friction ripple), whose sine and cosine terms start at zero where the size grid of
+    :func:`_start` cannot size them, and which a long horizon couples to the friction level
+    the base fit shifted to mimic their mean."""
     if not cols:
         return None
     X = np.column_stack([c for _, _, c in cols])
@@ -182,7 +187,9 @@ def rank_candidates(problem: Problem, current: JointParams,
             cols = [c for *_, c in base_cols] + [on - r0] + [c for *_, c in own]
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
-            newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
+            if any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
+                # order lines: the size grid of _start cannot size them (they start at zero)
+                newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
         except (SimulationError, ValueError):
             pass
         out.append({"name": name, "signature": eff.signature,
@@ -319,9 +326,10 @@ def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | Non
 
 
 def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
-            base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
-            ) -> tuple[tuple | None, str, list[dict]]:
-    """One round: rank the candidates, trial-refit the best, accept the first that passes.
+            base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int,
+            vgain: float = VALIDATION_GAIN) -> tuple[tuple | None, str, list[dict]]:
+    """One round: rank the candidates, trial-refit the best, accept the first that passes
+    (``vgain``: the share by which it must cut the validation NMSE).
 
     Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
     relative improvement)`` or None, ``reason`` why nothing passed.
@@ -376,11 +384,11 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                       if v_now[k] > 0 and math.isfinite(v_now[k])]
             ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
                      if ratios else 1.0)
-            if not ratio <= 1.0 - VALIDATION_GAIN:
+            if not ratio <= 1.0 - vgain:
                 reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
                                f"but the validation NMSE only by a factor {ratio:.2f} per "
                                f"channel (geometric mean; needs <= "
-                               f"{1 - VALIDATION_GAIN:.2f})")
+                               f"{1 - vgain:.2f})")
                 continue
         accepted = (best, polished, rel)
         break
@@ -395,20 +403,28 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
     """Search again at the longer horizons on which ``current`` drifts.
 
     The horizon is chosen with the base model (:meth:`.problem.Problem.choose_horizon`): the
-    longest on which it does not drift. A missing effect that acts over longer stretches than
-    that (a friction ripple over an output turn changes the speed slowly) is exactly such a
-    drift, and the short horizon hides it. So when nothing is found at the chosen horizon,
-    the longer horizons on which the current model's NMSE exceeds :data:`.problem.DRIFT` x its
-    NMSE at the chosen one are searched too (the :data:`ESCALATE` shortest of them: on the
-    longest ones the fit of a drifting model is rough); an effect found there must pass the
-    same checks, and the diagnosis then stays at that horizon (before and after are both
-    reported on it). Returns ``(accepted, candidates, current at that horizon)`` or None
-    (the horizon is left as it was).
+    longest on which it does not drift. A missing effect that acts over longer stretches
+    than that (a friction ripple over an output turn changes the speed slowly) is exactly
+    such a drift, and the short horizon hides it. So when nothing is found at the chosen
+    horizon, the longer horizons on which the model's NMSE exceeds :data:`.problem.DRIFT` x
+    its NMSE at the chosen one, and that by more than the noise level
+    (:data:`.outcome.NOISE_FACTOR` x the measurement-noise NMSE), are searched too: the
+    :data:`ESCALATE` shortest of them (on the longest ones the fit of a drifting model is
+    rough), each after a control refit of the base parameters there (the drift they
+    remove is slack of the base fit). Only while nothing has been named (the horizon is the
+    base model's); an effect found there must pass the same checks and cut the validation NMSE by
+    :data:`ESCALATED_GAIN`, and the diagnosis then stays at that horizon (before and after
+    are both reported on it). Returns ``(accepted, candidates, current at that horizon)``
+    or None (the horizon is left as it was).
     """
     h0 = problem.segment
     base = problem.nmse(current.params)["mean"]
     costs = getattr(problem, "horizons", {})
-    longer = [h for h in sorted(costs) if h > h0 and costs[h] > DRIFT * base]
+    # a drift within the record's noise level is no evidence of a missing effect (a base
+    # fit some per cent off drifts that much on any record)
+    floor = NOISE_FACTOR * problem.noise["mean"]
+    longer = [h for h in sorted(costs)
+              if h > h0 and costs[h] > DRIFT * base and costs[h] - base > floor]
     tried = longer[:ESCALATE]
     for h in tried:
         problem.segment = h
@@ -416,8 +432,17 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
             vprob.segment = h
         nm = problem.nmse(current.params)
         cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+        # control refit at this horizon: what the base parameters alone remove of the drift
+        # is slack of the base fit, not evidence of a missing effect
+        control = fit(problem, cur.params, model_params(cur.params, problem.scales, given),
+                      max_nfev=nfev_trial)
+        if control.cost < cur.cost:
+            cur = FitResult(control.params, {**cur.values, **control.values}, control.nmse,
+                            control.nfev, control.cost)
+        if not (cur.nmse["mean"] > DRIFT * base and cur.nmse["mean"] - base > floor):
+            continue
         accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
-                                          nfev_trial, nfev_polish)
+                                          nfev_trial, nfev_polish, ESCALATED_GAIN)
         if accepted is not None:
             return accepted, candidates, cur
     problem.segment = h0
@@ -497,7 +522,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 before = current
         accepted, reason, candidates = _search(problem, vprob, current, params, base_paths,
                                                threshold, nfev_trial, nfev_polish)
-        if accepted is None and auto and not problem.inverse:
+        if accepted is None and auto and not problem.inverse and not steps:
             # nothing at the chosen horizon: an effect that acts over longer stretches (a
             # friction ripple over an output turn, a slow speed change) shows as the drift
             # that made the short horizon the choice; look where the current model drifts
@@ -533,8 +558,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         if auto and not problem.inverse:
             # the horizon again, with the model that now has the effect: the base model may
             # have needed a short one (or allowed a long one) only because it lacked it
+            # (only shorter: a longer one is taken only where an effect removes the drift,
+            # see _escalate)
             h_prev = problem.segment
-            problem.choose_horizon(current.params)
+            problem.choose_horizon(current.params, tuple(h for h in HORIZONS if h <= h_prev))
             if vprob is not None:
                 vprob.segment = problem.segment
             if problem.segment != h_prev:
