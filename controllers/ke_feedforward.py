@@ -253,7 +253,7 @@ def identify_mesh_friction(record: Any, model: KEModel, *, torque_constant: floa
     positive when it opposes the motion). Subtracting the motor's inertia
     torque and the sensor's torque first keeps the motor's acceleration and
     the output's vibration out of the fit: both rise with the order and
-    would otherwise inflate the estimate (by 10-50 % on tuttle-joint3).
+    would otherwise inflate the estimate (on tuttle-joint3 by up to half).
 
     Args:
         record: a constant-speed record with ``current_command``,
@@ -344,8 +344,8 @@ class KEFeedforward:
         torque_constant: enables the torque term, N m/A (> 0).
         load_inertia: load share of the wrapped feedforward's inertia,
             ``J_o/ratio^2``, kg m^2 (>= 0; needs ``torque_constant``).
-        mesh_friction: friction in the mesh, N m output-referred (needs
-            ``torque_constant``).
+        mesh_friction: the friction in the mesh, a :class:`MeshFriction`
+            (N m output-referred; needs ``torque_constant``).
         dt: sample period for ``c''``, s.
     """
 
