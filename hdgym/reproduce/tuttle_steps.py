@@ -256,6 +256,14 @@ def check_joint1_torque(out: Path, quick: bool) -> Item:
                         f"{runs_alt.torque_peak[k]:.0f} N m" for k in range(a2, b2 + 1)))
     else:
         item.measured.append("for information, placement = output: no plateau")
+    item.measured.append(
+        "for information, the same run (placement = output) read as Tuttle's models 4 and 5 "
+        "would: friction between the splines on the output side of the compliance, the "
+        "sensor on the grounded spline reading the output's inertial torque J_o dω_o/dt; "
+        "its peak at " + ", ".join(f"{cur[k]:g}" for k in range(a, b + 1)) + " A: "
+        + " / ".join(f"{runs_alt.inertial_peak[k]:.0f}" for k in range(a, b + 1))
+        + " N m (the preset's currents; K_t and damping were calibrated for the mesh "
+        "placement, and with it the joint-1 speeds no longer form T2's plateau)")
     plt = plt_module()
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     t = np.arange(runs.torque.shape[0]) * runs.ctrl_dt
