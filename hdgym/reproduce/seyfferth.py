@@ -19,25 +19,34 @@ tolerance, the model's number and PASS/FAIL:
 
 Which item tuned which preset number is written in each preset's
 ``[sources]``; the items a preset was not tuned on are its checks.
-:func:`gain_curve` and :func:`fit_second_order` are plain functions reused
-by the tests.
+The experiments themselves (transfer function, eq. 14 fit, step from rest)
+are plain functions in :mod:`hdgym.reproduce.locked_output`, which the tests
+call directly.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from hdgym.effects import flags_of
 from hdgym.params import JointParams, preset
 from hdgym.physics import layout as L
 from hdgym.reproduce.common import Item, Paper, finish, plt_module, simulator
 from hdgym.reproduce.identifiability import check_identifiability
+from hdgym.reproduce.locked_output import (
+    STEP_ANGLES,
+    STEP_CURRENT,
+    STEP_MAX_ANGLE,
+    SecondOrder,
+    first_stuck_turn,
+    fit_second_order,
+    gain_curve,
+    step_after_cycle,
+    step_from_rest,
+)
 
 #: Seyfferth & Angeles 1995 §4.2 eq. 14, RH-32: current amplitude (A) -> (zeta, omega_n rad/s)
 EQ14 = {1.0: (0.32, 24.5), 2.0: (0.35, 18.5)}
@@ -53,73 +62,6 @@ STICK_SLIP_BELOW_HZ = 2.5
 
 def _verdict(ok: bool) -> str:
     return "PASS" if ok else "FAIL"
-
-
-# ===================================================================== analysis
-
-
-def gain_curve(p: JointParams, amplitude: float, freqs: np.ndarray, cycles: int = 8,
-               settle: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """Locked output, sine current: largest input rotation per ampere at each frequency.
-
-    Each frequency starts from rest and runs ``max(cycles / f, settle)`` s;
-    the gain is half the peak-to-peak motor angle over the last two cycles
-    divided by ``amplitude`` (Seyfferth's "transfer function", rad/A).
-
-    Returns:
-        ``(gain, stuck)``: gain (rad/A) and the fraction of those last two
-        cycles the motor spent stuck (speed exactly zero) per frequency.
-    """
-    sim = simulator(p, locked_output=True, sensors=False)
-    gains, stuck = [], []
-    for f in np.asarray(freqs, dtype=float):
-        if not (f > 0 and amplitude > 0):
-            raise ValueError(f"gain_curve: frequency and amplitude must be > 0, got {f}, "
-                             f"{amplitude}")
-        t, _, _, st = sim.trajectory(f"sine:{float(amplitude)!r}:{float(f)!r}",
-                                     max(cycles / f, settle))
-        last = t >= t[-1] - 2.0 / f
-        th = st[last, L.TH_M]
-        gains.append(0.5 * float(np.ptp(th)) / amplitude)
-        stuck.append(float(np.mean(st[last, L.W_M] == 0.0)))
-    return np.array(gains), np.array(stuck)
-
-
-@dataclass(frozen=True)
-class SecondOrder:
-    """Eq. 14 fitted to a transfer function: ``|H| = (K_t/J_1) / |omega_n^2 - w^2 + 2 j zeta
-    omega_n w|`` over the points at or above ``frac`` of the peak."""
-
-    zeta: float
-    omega_n: float
-    kt_over_j: float
-
-    def gain(self, f: np.ndarray) -> np.ndarray:
-        """Transfer function of the fitted system at ``f`` Hz, rad/A."""
-        w = 2 * np.pi * np.asarray(f, dtype=float)
-        return self.kt_over_j / np.hypot(self.omega_n**2 - w**2, 2 * self.zeta * self.omega_n * w)
-
-
-def fit_second_order(freqs: np.ndarray, gain: np.ndarray, kt_over_j: float,
-                     frac: float = 0.5) -> SecondOrder:
-    """Least-squares fit of eq. 14's (zeta, omega_n) to the resonance region of a gain curve.
-
-    ``K_t/J_1`` is fixed (eq. 14 normalizes by the input inertia), so the
-    fit has the same two unknowns as the paper's; the resonance region is
-    every point whose gain is at least ``frac`` of the peak.
-    """
-    f = np.asarray(freqs, dtype=float)
-    g = np.asarray(gain, dtype=float)
-    sel = g >= frac * g.max()
-    if sel.sum() < 3:
-        raise ValueError("fit_second_order: fewer than 3 points in the resonance region")
-    w = 2 * np.pi * f[sel]
-
-    def resid(z: np.ndarray) -> np.ndarray:
-        return kt_over_j / np.hypot(z[1] ** 2 - w**2, 2 * z[0] * z[1] * w) - g[sel]
-
-    sol = least_squares(resid, [0.3, 2 * np.pi * f[np.argmax(g)]], bounds=([1e-3, 0.1], [3.0, 1e3]))
-    return SecondOrder(float(sol.x[0]), float(sol.x[1]), kt_over_j)
 
 
 def _transfer_axes(ax: Any, f_max: float, g_top: float, title: str) -> None:
@@ -184,39 +126,6 @@ def check_eq14(out: Path, quick: bool) -> Item:
 # ===================================================================== (g) RH-32 step
 
 
-#: fig. 22: the step current (A) and the top of the paper's input-angle axis (rad)
-STEP_CURRENT = 1.1
-STEP_MAX_ANGLE = 0.6
-#: start angles of the step across one period of the kinematic error (pi rad of WG angle)
-STEP_ANGLES = 16
-
-
-def step_from_rest(p: JointParams, angles: int = STEP_ANGLES, current: float = STEP_CURRENT,
-                   duration: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Locked output, a current step from rest at ``angles`` WG angles spread over pi rad.
-
-    The joint starts relaxed (no torque, hysteresis on its virgin branch) at each
-    angle; the kinematic error's phase at the start is what the angle changes.
-
-    Returns:
-        ``(start, rise, final)``: the start angles (rad), the largest rise of the
-        input angle over the step (rad) and its rise at the end (rad), per angle.
-    """
-    sim = simulator(p, locked_output=True, sensors=False)
-    row = L.pack(p)[None, :]
-    flags = flags_of(p.effects, True)
-    start = np.arange(angles) * math.pi / angles
-    rise, final = [], []
-    n = int(round(duration / sim.ctrl_dt))
-    for a in start:
-        x0 = L.initial_state(row, flags, float(a), None)[0]
-        _, _, _, st = sim.trajectory(np.full(n, current), state=x0)
-        th = st[:, L.TH_M] - a
-        rise.append(float(th.max()))
-        final.append(float(th[-1]))
-    return start, np.array(rise), np.array(final)
-
-
 def check_step(out: Path, quick: bool) -> Item:
     """(g) RH-32 1.1 A current step (fig. 22)."""
     item = Item("g", "RH-32 current step, no overshoot (Seyfferth §4.2, fig. 22)",
@@ -260,7 +169,7 @@ def check_step(out: Path, quick: bool) -> Item:
                          "then 1 s at 0 A; the report does not give the drive's state before "
                          "the step): " + "; ".join(
                              f"cycle starting {'up' if sign > 0 else 'down'}: rise "
-                             f"{_step_after_cycle(sim, sign):.3f} rad" for sign in (1.0, -1.0)))
+                             f"{step_after_cycle(sim, sign):.3f} rad" for sign in (1.0, -1.0)))
     plt = plt_module()
     fig, ax = plt.subplots(figsize=(6, 4.5))
     row = L.pack(p)[None, :]
@@ -279,15 +188,6 @@ def check_step(out: Path, quick: bool) -> Item:
     ax.set_title("RH-32 1.1 A step input response (beside Seyfferth fig. 22)", fontsize=10)
     ax.legend(fontsize=8)
     return finish(item, fig, out / "seyfferth_rh32_step.png", ok)
-
-
-def _step_after_cycle(sim: Any, sign: float) -> float:
-    """Largest rise of the input angle in a 1.1 A step taken after one slow current cycle."""
-    t = np.arange(2000) * sim.ctrl_dt
-    pre = np.where(t < 2.0, sign * 1.1 * np.sin(np.pi * t), 0.0)
-    _, _, _, st = sim.trajectory(np.concatenate([pre, np.zeros(1000)]))
-    _, _, _, st2 = sim.trajectory(np.full(1000, 1.1), state=st[-1])
-    return float(np.max(st2[:, L.TH_M]) - st[-1, L.TH_M])
 
 
 # ===================================================================== (h) RH-25 fig. 18
@@ -373,7 +273,7 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     item.measured.append("at " + ", ".join(f"{f:g} Hz {100 * s:.1f} %" for f, s in zip(
         above, st_hi, strict=True)) + f" {_verdict(ok_hi)}")
     sim = simulator(p, locked_output=True, sensors=False)
-    turn = _first_stuck_turn(p, sim, 3.0)
+    turn = first_stuck_turn(p, sim, 3.0)
     if turn is not None:
         net, b_m0, decel = turn
         item.measured.append(
@@ -395,24 +295,6 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     ax.set_title("RH-25, i_m = 1 amp (beside Seyfferth fig. 19)", fontsize=10)
     ax.legend(fontsize=8)
     return finish(item, fig, out / "seyfferth_rh25_fig19.png", ok_lo and ok_hi)
-
-
-def _first_stuck_turn(p: JointParams, sim: Any, f: float,
-                     cycles: int = 8) -> tuple[float, float, float] | None:
-    """Where a locked-output 1 A sine first sticks over its last two cycles.
-
-    Returns ``(|tau_m - T_k/N|, B_m0(L), deceleration)`` at the first control period
-    with the shaft stopped (N m, N m, rad/s² over the period before), or None.
-    """
-    t, _, _, st = sim.trajectory(f"sine:1.0:{f!r}", cycles / f)
-    w = st[:, L.W_M]
-    idx = np.flatnonzero((t >= t[-1] - 2.0 / f) & (w == 0.0))
-    if idx.size == 0 or idx[0] == 0:
-        return None
-    k = int(idx[0])
-    net = p.motor.torque_constant * st[k, L.CUR] - st[k, L.TK] / p.ratio
-    b_m0 = p.friction.input.coulomb + p.hysteresis.startup_slope * st[k, L.HZ + 4]
-    return abs(float(net)), float(b_m0), abs(float(w[k - 1])) / sim.ctrl_dt
 
 
 # ===================================================================== (j) RH-25 ablation
