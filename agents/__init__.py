@@ -9,7 +9,12 @@
   parameters (a whole tuning grid is one native batch);
 * :mod:`agents.front`: ``python -m agents.front``: tune the families on
   training episodes, their success front on held-out episodes;
-* :mod:`agents.report`: writes ``results/rl/``;
+* :mod:`agents.rules`: the rules that pick the task's deadline and gear
+  rating from the measured front;
+* :mod:`agents.benchmark`: ``python -m agents.benchmark``: fronts, rules,
+  check of the registered constants, training, ``results/rl/`` in one command;
+* :mod:`agents.report`: writes ``results/rl/`` (:mod:`agents.other_joints`:
+  its section on joints 2 and 3);
 * :mod:`agents.vec_env`: :class:`~agents.vec_env.HarmonicDriveVecEnv`, an
   SB3 ``VecEnv`` over the native batched env;
 * :mod:`agents.bench`: SB3 training throughput for ``hdgym bench``.

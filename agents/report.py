@@ -4,11 +4,7 @@ Long because: the page is one argument (families, fronts, variants, drive spread
 beyond-horizon check) written in the order a reader follows it; the figures live in
 agents/report_figures.py.
 
-    python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
-    cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
-    python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0
-    cp runs/resonance_ppo_notorque-s0/final.zip agents/policies/resonance_ppo_notorque.zip
-    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl
+    python -m agents.benchmark --out results/rl   # fronts, rules, training, this page
 
 Per variant of the task (:data:`VARIANTS`) the classical families are tuned
 on training episodes and measured on held-out episodes (:mod:`agents.front`),
@@ -25,6 +21,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -39,13 +36,14 @@ from agents.front import (
     best_classical,
     controller,
     run_batch,
-    run_grid,
     success,
     tune_and_test,
     uncut,
     wilson,
 )
+from agents.other_joints import OTHER_TARGET_DEG_S, other_joints
 from agents.report_figures import front_figure, learning_curve, speed_figure
+from agents.rules import RATED_MAXIMUM, check_constants, rules
 from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
 from hdgym.files import atomic_write_text, check_out
 
@@ -94,23 +92,6 @@ def classical_runs(cfg: dict[str, Any], name: str, point: dict[str, float], seed
     return run_batch(c, ctl, seeds)
 
 
-def base_families(front: dict[str, Any]) -> dict[str, Any]:
-    """The families tuned over the whole front (not the KE feedforward, which is tuned on
-    top of the pick at the task's own rating and deadline, so cannot choose them)."""
-    return {k: f for k, f in front["families"].items() if "+" not in k}
-
-
-def deadline_rule(front: dict[str, Any]) -> tuple[float | None, dict[str, float]]:
-    """The shortest deadline at which every base family reaches the target in >= 90 % of
-    the training episodes with the torque uncapped (the front's largest cap)."""
-    j = len(front["caps"]) - 1
-    for i, d in enumerate(front["deadlines"]):
-        fr = {k: f["front"][i][j]["train"] for k, f in base_families(front).items()}
-        if min(fr.values()) >= 0.9:
-            return d, fr
-    return None, {}
-
-
 def variant_config(name: str) -> tuple[dict[str, Any], float]:
     """The env config of a variant (from its agents config) and its deadline."""
     cfg_name, _, deadline = VARIANTS[name]
@@ -133,10 +114,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--check-episodes", type=int, default=256,
                     help="episodes of the +-30 %% and beyond-the-horizon checks (0: skip)")
     ap.add_argument("--fronts", nargs="+", type=Path,
-                    help="fronts written by python -m agents.front --ke 200 2 (one per config) "
+                    help="fronts with KE feedforward at the rating and deadline (agents.benchmark "
+                    "writes them; one per config) "
                     "instead of computing them here")
     ap.add_argument("--note", default="", help="provenance note printed at the top of the page "
                     "(e.g. where the committed policies were trained)")
+    ap.add_argument("--policies", type=Path, default=POLICIES,
+                    help="folder of the policy zips (default agents/policies)")
+    ap.add_argument("--previous", type=Path, help="the evaluation.json of the page this one "
+                    "replaces: the page says what moved")
+    ap.add_argument("--timing", help="JSON of the pipeline's timing (agents.benchmark)")
     ap.add_argument("--quick", action="store_true", help="small grids and 8 episodes")
     ap.add_argument("--out", type=Path, default=Path("runs/rl"),
                     help="folder to write (default %(default)s; committed: --out results/rl)")
@@ -148,7 +135,10 @@ def main(argv: list[str] | None = None) -> int:
             args.episodes, args.check_episodes = 8, min(args.check_episodes, 8)
         if args.episodes < 1 or args.check_episodes < 0:
             raise ValueError("--episodes must be >= 1 and --check-episodes >= 0")
-        page = build(args, quick)
+        previous = None
+        if args.previous is not None and args.previous.is_file():
+            previous = json.loads(args.previous.read_text())  # read before it is replaced
+        page = build(args, quick, previous)
     except ValueError as exc:
         print(f"agents.report: {exc}", file=sys.stderr)
         return 2
@@ -157,9 +147,11 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def build(args: argparse.Namespace, quick: bool) -> str:
+def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None = None) -> str:
     """Run everything and write the page; returns its markdown."""
+    t_start = time.perf_counter()
     out: Path = args.out
+    policies: Path = args.policies
     out.mkdir(parents=True, exist_ok=True)
     n_test = args.episodes
     n_train = args.train_episodes or max(args.episodes // 2, 1)
@@ -197,7 +189,7 @@ def build(args: argparse.Namespace, quick: bool) -> str:
             front = tune_and_test(cfg, grids, train_seeds, test_seeds, CAPS, DEADLINES, log)
             add_ke(cfg, front, RATING, deadline, 6.0, train_seeds, test_seeds, quick, log)
         fronts[var] = front
-        zip_path = POLICIES / zip_name
+        zip_path = policies / zip_name
         if zip_path.is_file():
             model = load_policy(zip_path)
             pcfg = policy_config(zip_path) or cfg
@@ -228,7 +220,8 @@ def build(args: argparse.Namespace, quick: bool) -> str:
             det.append(f"| PPO policy (`agents/policies/{zip_name}`) | - | - | "
                        f"{ci(float(p_ok.sum()), n_test)} |")
             reach = p["time_to_target"][np.isfinite(p["time_to_target"])]
-            det += ["", f"Policy: mean time to target {reach.mean():.2f} s, peak torque "
+            mean_t = f"{reach.mean():.2f} s" if reach.size else "- (never reached)"
+            det += ["", f"Policy: mean time to target {mean_t}, peak torque "
                     f"{p['peak_torque'].mean():.0f} / {p['peak_torque'].max():.0f} N m (mean "
                     "/ max)."]
         details.append("\n".join(det))
@@ -240,28 +233,38 @@ def build(args: argparse.Namespace, quick: bool) -> str:
     main_var = "HarmonicDriveResonance-v0"
     checks = ""
     if args.check_episodes and main_var in pol:
-        checks = robustness(main_var, fronts[main_var], args.check_episodes, summary)
+        checks = robustness(main_var, fronts[main_var], args.check_episodes, summary,
+                            policies)
     front_figure({k: v for k, v in fronts.items() if VARIANTS[k][2] is None or k == main_var},
                  pol, out / "front.png", RATING)
-    d_rule, uncapped = deadline_rule(fronts[main_var])
-    i2 = fronts[main_var]["deadlines"].index(DEADLINE)
-    best_at = {cap: max(f["front"][i2][fronts[main_var]["caps"].index(cap)]["train"]
-                        for f in base_families(fronts[main_var]).values())
-               for cap in (180, 190, 200, 210, 220)}
-    oj = other_joints(min(args.check_episodes, 64)) if args.check_episodes else ""
+    try:
+        ruled = rules(fronts[main_var])
+    except ValueError as exc:
+        if not quick:
+            raise
+        ruled = {"deadline": math.nan, "rating": math.nan, "long_deadline": math.nan,
+                 "uncapped_train_success": {}, "best_train_success": {}, "error": str(exc)}
+    edits = check_constants(ruled)
+    if edits and not quick:
+        raise ValueError("the registered constants disagree with the rules on this front; set "
+                         "in hdgym/envs/resonance.py: " + "; ".join(edits))
+    oj = other_joints(min(args.check_episodes, 64), TEST_SEED) if args.check_episodes else ""
     sf = ""
     if main_var in pol:
         cfg, deadline = variant_config(main_var)
-        sf = speed_figure(main_var, cfg, deadline, POLICIES / VARIANTS[main_var][1],
+        sf = speed_figure(main_var, cfg, deadline, policies / VARIANTS[main_var][1],
                           fronts[main_var], out / "speed_vs_time.png", RATING, TEST_SEED)
     lc = learning_curve(args.run, out / "learning_curve.png")
     train_txt = training_text(args.run) + "\n\n" + speed_text(quick)
     (out / "front.json").write_text(json.dumps(fronts, indent=1) + "\n")
-    summary["deadline_rule"] = {"deadline": d_rule, "uncapped_train_success": uncapped,
-                                "best_train_success_at_2s": best_at}
+    summary["rules"] = ruled
+    timing = json.loads(args.timing) if args.timing else {}
+    timing["report_s"] = round(time.perf_counter() - t_start, 1)
+    summary["timing"] = timing
+    summary["commit"] = fronts[main_var].get("commit", "unknown")
     (out / "evaluation.json").write_text(json.dumps(summary, indent=1, default=float) + "\n")
-    md = page(rows, details, checks, d_rule, uncapped, best_at, lc, train_txt, n_test, n_train,
-              quick, oj, sf)
+    md = page(rows + ["", verdict(summary)], details, checks, ruled, lc, train_txt, n_test,
+              n_train, quick, oj, sf, moved(previous, summary), timing_text(timing))
     if args.note:
         md = md.replace("\n\n", f"\n\n**Note.** {args.note}\n\n", 1)
     atomic_write_text(out / "evaluation.md", md)
@@ -283,11 +286,12 @@ def fmt_point(p: dict[str, float]) -> str:
     return ", ".join(parts)
 
 
-def robustness(var: str, front: dict[str, Any], n: int, summary: dict[str, Any]) -> str:
+def robustness(var: str, front: dict[str, Any], n: int, summary: dict[str, Any],
+               policies: Path = POLICIES) -> str:
     """The policy and the best classical pick at +-30 % randomization; the policy beyond
     its horizon."""
     cfg, deadline = variant_config(var)
-    zip_path = POLICIES / VARIANTS[var][1]
+    zip_path = policies / VARIANTS[var][1]
     model = load_policy(zip_path)
     pcfg = policy_config(zip_path) or cfg
     seeds = list(range(TEST_SEED + 50_000, TEST_SEED + 50_000 + n))
@@ -316,51 +320,6 @@ def robustness(var: str, front: dict[str, Any], n: int, summary: dict[str, Any])
             "saturates at the horizon, so it keeps doing what it does at the episode's end).\n")
 
 
-#: other joints: (preset, constant currents in A from Tuttle's step ranges to the amplifier's
-#: limit); targets above their 2x-order traps near 10,000 deg/s
-OTHER_JOINTS = (("tuttle-joint2", (1.4, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5)),
-                ("tuttle-joint3", (0.28, 0.35, 0.4, 0.45, 0.5, 0.6)))
-OTHER_TARGET_DEG_S = (12_000.0, 14_000.0)
-
-
-def other_joints(n: int) -> str:
-    """Constant current steps on joints 2 and 3: is there a trap, and does crossing it
-    cost torque (the trade-off the task needs)?"""
-    verdicts = []
-    lines = [f"{n} held-out episodes per row.", "",
-             "| joint | constant current (A) | reached (of episodes) | mean time to target (s) "
-             "| peak flexspline torque mean / max (N m) |", "|---|---|---|---|---|"]
-    for name, levels in OTHER_JOINTS:
-        cfg = load_config("resonance_ppo")
-        kw = cfg["env"]["kwargs"]
-        kw["preset"] = name
-        kw["target_speed"] = [math.radians(v) for v in OTHER_TARGET_DEG_S]
-        res = run_grid(cfg, "const", [{"level": lv} for lv in levels],
-                       list(range(TEST_SEED, TEST_SEED + n)))
-        for lv, t, p in zip(levels, res["time_to_target"], res["peak_torque"], strict=True):
-            ok = np.isfinite(t)
-            tt = f"{t[ok].mean():.2f}" if ok.any() else "-"
-            lines.append(f"| {name} | {lv:g} | {pct(ok.mean())} | {tt} | {p.mean():.0f} / "
-                         f"{p.max():.0f} |")
-        reach = np.isfinite(res["time_to_target"]).mean(axis=1)
-        peaks = res["peak_torque"].mean(axis=1)
-        trapped = [lv for lv, r in zip(levels, reach, strict=True) if r < 0.5]
-        crossing = reach >= 0.95
-        verdicts.append(
-            f"{name}: trapped (reached in < 50 %) at {', '.join(f'{v:g}' for v in trapped)} A"
-            if trapped else f"{name}: no current tried stays trapped")
-        if not crossing[-1]:
-            verdicts[-1] += "; full current does not cross in >= 95 %: no task by a deadline"
-        elif peaks[-1] <= 1.25 * peaks[crossing].min():
-            verdicts[-1] += (f"; full current crosses fastest with a peak of {peaks[-1]:.0f} "
-                             f"N m against {peaks[crossing].min():.0f} N m for the gentlest "
-                             "current that crosses: no torque-time trade-off for a rating")
-        else:
-            verdicts[-1] += (f"; crossing faster costs torque ({peaks[crossing].min():.0f} to "
-                             f"{peaks[-1]:.0f} N m mean peak): a candidate for a rated variant")
-    return "\n".join(lines) + "\n\n" + ".\n".join(verdicts) + ".\n"
-
-
 def speed_text(quick: bool) -> str:
     """The training speed-up, native batch against the DummyVecEnv setup, measured here."""
     from agents.bench import bench_resonance_training
@@ -386,31 +345,89 @@ def training_text(run: Path | None) -> str:
             "DummyVecEnv envs.")
 
 
-def page(rows: list[str], details: list[str], checks: str, d_rule: float | None,
-         uncapped: dict[str, float], best_at: dict[int, float], lc: str, train_txt: str,
-         n_test: int, n_train: int, quick: bool, oj: str, sf: str) -> str:
-    unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in uncapped.items())
-    bat = ", ".join(f"{k} N m: {pct(v)}" for k, v in best_at.items())
+def moved(previous: dict[str, Any] | None, now: dict[str, Any]) -> str:
+    """What moved against the page this one replaces (its ``evaluation.json``)."""
+    if not previous:
+        return "No earlier page to compare with (`--previous` not given or missing)."
+    lines = [f"Against the page this one replaces (its fronts computed at commit "
+             f"{previous.get('commit', 'unknown, before the rules were code')}; this page's: "
+             f"{now.get('commit', 'unknown')}):", "",
+             "| variant | rating (N m) | deadline (s) | PPO policy | best classical family | "
+             "its success |", "|---|---|---|---|---|---|"]
+
+    def cell(a: Any, b: Any, fmt: Any) -> str:
+        return fmt(b) if a == b else f"{'-' if a is None else fmt(a)} -> {fmt(b)}"
+
+    def p(x: float | None) -> str:
+        return "-" if x is None else pct(x)
+
+    for var, v in now["variants"].items():
+        o = previous.get("variants", {}).get(var, {})
+        lines.append(
+            f"| `{var}` | {cell(o.get('rating'), v['rating'], lambda x: f'{x:g}')} | "
+            f"{cell(o.get('deadline'), v['deadline'], lambda x: f'{x:g}')} | "
+            f"{p(o.get('policy_success'))} -> {p(v['policy_success'])} | "
+            f"{cell(label(o['best_classical']) if o else None, label(v['best_classical']), str)}"
+            f" | {p(o.get('best_classical_success'))} -> {p(v['best_classical_success'])} |")
+    o, n = previous.get("checks", {}), now.get("checks", {})
+    if o and n:
+        lines += ["", "| `HarmonicDriveResonance-v0`, held-out drive spread | success |",
+                  "|---|---|"]
+        for key, v in n["success_by_spread"].items():
+            if key in o["success_by_spread"]:
+                name, _, spread = key.rpartition(" +-")
+                lines.append(f"| {name}, ±{100 * float(spread):.0f} % | "
+                             f"{pct(o['success_by_spread'][key])} -> {pct(v)} |")
+    return "\n".join(lines) + "\n"
+
+
+def verdict(summary: dict[str, Any]) -> str:
+    """Issue 15's target per variant: policy >= 90 %, best tuned classical <= 70 %."""
+    met, missed = [], []
+    for var, v in summary["variants"].items():
+        if v["policy_success"] is None:
+            continue
+        txt = (f"`{var}` (policy {pct(v['policy_success'])}, best classical "
+               f"{pct(v['best_classical_success'])})")
+        (met if v["policy_success"] >= 0.9 and v["best_classical_success"] <= 0.7
+         else missed).append(txt)
+    return ("The target (a variant where the policy succeeds in ≥ 90 % of the held-out "
+            "episodes and the best tuned classical family in ≤ 70 %): met on "
+            + (", ".join(met) if met else "no variant") + "; not met on "
+            + (", ".join(missed) if missed else "none") + ".")
+
+
+def timing_text(t: dict[str, Any]) -> str:
+    """The pipeline's wall times, as measured in this run."""
+    parts = []
+    if t.get("fronts_s") and all(x is not None for x in t["fronts_s"]):
+        parts.append("fronts " + " and ".join(f"{x / 60:.1f} min" for x in t["fronts_s"]))
+    if t.get("training_s") is not None:
+        parts.append(f"training both policies {t['training_s'] / 60:.1f} min")
+    elif "training_s" in t:
+        parts.append("no training (the committed policies)")
+    parts.append(f"this page {t['report_s'] / 60:.1f} min")
+    return ("Wall times of this run on the shared 2-core machine (other jobs running): "
+            + ", ".join(parts) + ".")
+
+
+def page(rows: list[str], details: list[str], checks: str, ruled: dict[str, Any], lc: str,
+         train_txt: str, n_test: int, n_train: int, quick: bool, oj: str, sf: str,
+         moved_txt: str, timing_txt: str) -> str:
+    unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in ruled["uncapped_train_success"].items())
+    near = [c for c in ruled["best_train_success"] if abs(c - ruled["rating"]) <= 20]
+    bat = ", ".join(f"{c:g} N m: {pct(ruled['best_train_success'][c])}" for c in near)
     head = "**Quick smoke-test run: small grids, few episodes; not a result.**\n\n" if quick \
         else ""
     return f"""# Resonance trap: the learned policy against tuned classical controllers
 
-{head}Regenerate (each command is independent of the others until the last; training takes
-about 2 min per policy on an idle 2-core machine, each front about 10 min):
+{head}Regenerate everything on this page (the fronts, the rules that pick the rating and the
+deadline, the check of the registered constants, both policies, this page):
 
-    python -m agents.train --config resonance_ppo --out runs/resonance_ppo-s0
-    cp runs/resonance_ppo-s0/final.zip agents/policies/resonance_ppo.zip
-    python -m agents.train --config resonance_ppo_notorque --out runs/resonance_ppo_notorque-s0
-    cp runs/resonance_ppo_notorque-s0/final.zip agents/policies/resonance_ppo_notorque.zip
-    python -m agents.front --config resonance_ppo --ke 200 2 --train 64 --test 200 \\
-        --out runs/rl/front_resonance_ppo.json
-    python -m agents.front --config resonance_ppo_notorque --ke 200 2 --train 64 --test 200 \\
-        --out runs/rl/front_resonance_ppo_notorque.json
-    python -m agents.report --run runs/resonance_ppo-s0 --out results/rl --episodes 200 \\
-        --train-episodes 64 --check-episodes 200 \\
-        --fronts runs/rl/front_resonance_ppo.json runs/rl/front_resonance_ppo_notorque.json
+    python -m agents.benchmark --out results/rl
 
-(`agents.report` without `--fronts` computes the fronts itself.)
+It stops with the values to set if `hdgym/envs/resonance.py` disagrees with the rules
+(then `--reuse-fronts` continues after the edit). {timing_txt}
 
 The 5-seed study: `hdgym sweep rl --out results/sweeps/rl-run --summary-dir results/sweeps`
 (`results/sweeps/rl.md`).
@@ -425,16 +442,20 @@ and KE amplitude): bring the motor from rest through the 2x-order resonance trap
 * **Rating: {RATING:.0f} N m**, a hard momentary peak: an episode whose |flexspline torque|
   exceeds it ends there and fails. Tuttle's thesis keeps no catalog numbers; it says joint
   1's stiffness test reached 35 % of the drive's rated maximum torque, and that test ended
-  at 100 N m, so the rated maximum is about 286 N m; {RATING:.0f} N m is 70 % of it.
-  The value was picked from the classical front below: at the 2 s deadline it is where the
-  best tuned classical family (before KE feedforward, which is tuned at this point)
-  succeeds in about half the training episodes (best training success at caps {bat}).
+  at 100 N m, so the rated maximum is about {RATED_MAXIMUM:.0f} N m; {RATING:.0f} N m is
+  {100 * RATING / RATED_MAXIMUM:.0f} % of it. The rule (`agents.rules.rating_rule`): at the
+  deadline (picked first, below), the smallest cap of the front (10 N m steps) at which
+  the best tuned classical family (before KE feedforward, which is tuned at this point)
+  succeeds in ≥ 50 % of the training episodes, and not above the rated maximum
+  (measured: {ruled["rating"]:g} N m; best training success at caps {bat}).
 * **Deadline: {DEADLINE:g} s**, the target (speed filtered with 25 ms within 5 %) must be
-  reached by then; the episode lasts 3 s, the rating holds for all of it. The deadline is
-  the shortest deadline of the front at which every classical family reaches the target in
-  ≥ 90 % of the training episodes when the torque is not capped (measured: {d_rule} s;
-  uncapped training success at that deadline: {unc}).
-* Variants: `HarmonicDriveResonanceLong-v0` (deadline {LONG_DEADLINE:g} s);
+  reached by then; the episode lasts 3 s, the rating holds for all of it. The rule
+  (`agents.rules.deadline_rule`): the shortest deadline of the front at which every
+  classical family reaches the target in ≥ 90 % of the training episodes when the torque
+  is not capped (measured: {ruled["deadline"]:g} s; uncapped training success at that
+  deadline: {unc}). The rules see the training episodes only, never the policy.
+* Variants: `HarmonicDriveResonanceLong-v0` (deadline {LONG_DEADLINE:g} s, the whole
+  episode; `agents.rules.long_deadline_rule`);
   `HarmonicDriveResonanceNoTorqueSensor-v0` (encoders and current only; the classical
   damping uses the twist integrated from the two encoders' velocities). Another joint's
   trap: not registered (see the end).
@@ -484,7 +505,10 @@ randomized parameter in ±30 % on {TEST_SEED + 50_000}+ seeds.
 
 {lc}
 
-## Defects fixed in this revision
+## What moved
+
+{moved_txt}
+## Defects fixed on the way (issue 15)
 
 * `agents/evaluate.py` gave `PISpeedController` `dt = ctrl_dt` but called it every 5
   periods: every classical controller now acts every control period (`dt = ctrl_dt`), only

@@ -117,6 +117,8 @@ def learning_curve(run: Path | None, out: Path) -> str:
 
     text = (run / "monitor" / "native.monitor.csv").read_text().splitlines()
     rows = list(csv.DictReader(text[1:]))  # line 0 is the monitor's JSON header
+    if not rows:
+        return "Learning curve: no training episode finished in this run."
     ret = np.array([float(r["r"]) for r in rows])
     ok = np.array([r.get("is_success") == "True" for r in rows], dtype=float)
     t = np.array([float(r["t"]) for r in rows])

@@ -290,3 +290,70 @@ def test_report_quick_writes_the_page(tmp_path):
     page = (tmp_path / "rl" / "evaluation.md").read_text()
     assert "Quick smoke-test run" in page and "HarmonicDriveResonanceNoTorqueSensor-v0" in page
     assert (tmp_path / "rl" / "front.png").is_file()
+
+
+# ------------------------------------------------------------ the rules: rating and deadline
+def _front(train: dict[str, list[list[float]]], caps: list[float],
+           deadlines: list[float]) -> dict:
+    """A front with given training success per family, deadline and cap."""
+    return {"caps": caps, "deadlines": deadlines, "families": {
+        name: {"front": [[{"train": s} for s in row] for row in rows]}
+        for name, rows in train.items()}}
+
+
+def test_rules_pick_deadline_then_rating_from_the_training_front():
+    from agents.rules import RATED_MAXIMUM, check_constants, rating_rule, rules
+
+    caps, deadlines = [180.0, 190.0, 200.0, 400.0], [2.0, 2.5, 3.0]
+    f = _front({"const": [[0.0, 0.1, 0.2, 0.85], [0.1, 0.2, 0.3, 0.95], [0.2, 0.3, 0.4, 1.0]],
+                "damp": [[0.3, 0.6, 0.7, 1.0], [0.4, 0.5, 0.8, 1.0], [0.5, 0.7, 0.9, 1.0]],
+                # KE feedforward takes no part: tuned at the rating and deadline
+                "damp+ke": [[1.0] * 4] * 3}, caps, deadlines)
+    r = rules(f)
+    # 2 s: const reaches only 85 % uncapped; 2.5 s: every family >= 90 %
+    assert r["deadline"] == 2.5 and r["uncapped_train_success"] == {"const": 0.95, "damp": 1.0}
+    assert r["rating"] == 190.0 and r["long_deadline"] == 3.0  # first cap with best >= 50 %
+    assert r["best_train_success"][180.0] == 0.4
+    assert check_constants(r, {"deadline": 2.5, "rating": 190.0, "long_deadline": 3.0}) == []
+    assert check_constants(r, {"deadline": 2.0, "rating": 200.0, "long_deadline": 3.0}) == [
+        "DEADLINE = 2.5", 'GEAR_RATINGS["tuttle-joint1"] = 190.0']
+    # a rating above the drive's rated maximum (~286 N m) is refused
+    high = _front({"const": [[0.1, 0.2, 0.3, 0.9]]}, [200.0, 250.0, 300.0, 400.0], [2.0])
+    assert RATED_MAXIMUM == pytest.approx(285.7, abs=0.1)
+    with pytest.raises(ValueError, match="rated maximum"):
+        rating_rule(high, 2.0)
+    with pytest.raises(ValueError, match="no deadline"):
+        rules(_front({"const": [[0.1, 0.2, 0.3, 0.5]]}, caps, [2.0]))
+    with pytest.raises(ValueError, match="not longer"):
+        rules(_front({"const": [[0.1, 0.6, 0.7, 0.95]]}, caps, [3.0]))
+
+
+def test_committed_front_and_registered_constants_follow_the_rules():
+    """results/rl/front.json (the committed front) gives, by the rules, exactly the
+    registered deadline, long deadline and rating, and the page was made with them."""
+    import json
+
+    from agents.rules import check_constants, registered, rules
+
+    res = Path(__file__).resolve().parents[1] / "results" / "rl"
+    fronts = json.loads((res / "front.json").read_text())
+    ruled = rules(fronts["HarmonicDriveResonance-v0"])
+    assert check_constants(ruled) == [], "set these in hdgym/envs/resonance.py"
+    ev = json.loads((res / "evaluation.json").read_text())
+    reg = registered()
+    assert ev["rules"]["deadline"] == reg["deadline"] and ev["rules"]["rating"] == reg["rating"]
+    for name, v in ev["variants"].items():
+        assert v["rating"] == reg["rating"]
+        assert v["deadline"] == (reg["long_deadline"] if "Long" in name else reg["deadline"])
+
+
+def test_benchmark_quick_runs_the_pipeline(tmp_path):
+    """agents.benchmark --quick: small fronts, the rules, KE, the page (no training here)."""
+    from agents.benchmark import main as bench_main
+
+    work = tmp_path / "work"
+    assert bench_main(["--quick", "--skip-train", "--fronts-dir", str(work)]) == 0
+    page = (work / "evaluation.md").read_text()
+    assert "Quick smoke-test run" in page and "agents.rules.rating_rule" in page
+    assert (work / "front_resonance_ppo_ke.json").is_file()
+    assert bench_main(["--quick", "--out", "results/rl"]) == 2  # never into results/

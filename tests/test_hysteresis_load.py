@@ -147,3 +147,34 @@ def test_slopes_need_the_tanh_model_and_signs_are_checked():
     with pytest.raises(ValueError, match="hysteresis.width_slope"):
         Hysteresis(model="tanh", width_slope=-0.1)
     assert Hysteresis(model="tanh", shape_slope=-3.0).shape_slope == -3.0
+
+
+def test_virgin_curve_is_the_masing_curve():
+    """From rest (no reversal yet) the element loads along B_f tanh(2 gamma phi), in either
+    direction (docs/physics.md eq. H1): its initial slope 2 gamma B_f is the slope just after
+    a reversal from a saturated branch, as Masing's rule asks."""
+    p0 = make_joint("tanh", "linear").without("kinematic_error", "coulomb_friction",
+                                             "stribeck_friction", "stiction",
+                                             "position_dependent_friction")
+    p0 = p0.set("friction.input.viscous", 0.05).set("friction.input.cubic", 0.0)
+    p = _loaded(p0, width_slope=0.0, shape_slope=0.0, startup_slope=0.0, shape=2e4)
+    k1, bf, gam = p.compliance.stiffness, p.hysteresis.width, p.hysteresis.shape
+    ramp = np.linspace(0.0, 3.0, 3000)
+    for sign in (1.0, -1.0):
+        st = _locked_run(p, sign * ramp)
+        phi, tk = st[:, L.DTH], st[:, L.TK]
+        t_h = tk - k1 * phi
+        small = np.abs(phi) < 2.0 / gam  # the steep part of the virgin curve
+        assert small.sum() > 20
+        np.testing.assert_allclose(t_h[small], bf * np.tanh(2.0 * gam * phi[small]),
+                                   atol=0.02 * bf)
+    # after the first reversal from near saturation: the Seyfferth branch (slope gamma (B_f +
+    # |dT*|), i.e. about 2 gamma B_f), unchanged by the virgin rule
+    st = _locked_run(p, np.concatenate([ramp, ramp[::-1]]))
+    phi, tk = st[:, L.DTH], st[:, L.TK]
+    rev = int(np.argmax(phi))
+    after = slice(rev + 5, rev + 40)
+    slope = np.polyfit(phi[after], (tk - k1 * phi)[after], 1)[0]
+    t_star = (tk - k1 * phi)[rev]
+    assert slope == pytest.approx(gam * (bf + t_star), rel=0.1)
+    assert st[-1, L.HZ + 5] == 0.0 and st[rev - 10, L.HZ + 5] == 1.0

@@ -198,19 +198,34 @@ def test_joint1_steps_item(tmp_path) -> None:
     assert item.passed, [c.line() for c in item.checks]
 
 
-def test_joint1_torque_sensor_item(tmp_path) -> None:
+@pytest.fixture(scope="module")
+def joint1_torque_item(tmp_path_factory):
+    return tuttle_steps.check_joint1_torque(tmp_path_factory.mktemp("t3"), quick=True)
+
+
+def test_joint1_torque_sensor_item(joint1_torque_item) -> None:
     """T3: with the transmission friction in the mesh the torque sensor oscillates around
     zero at the plateau; placed between output and ground it reads the friction as a
     bias (Tuttle §3 p. 113), which is what the former presets showed."""
-    item = tuttle_steps.check_joint1_torque(tmp_path, quick=True)
-    mean = item.checks[0]
+    mean = joint1_torque_item.checks[0]
     assert mean.passed, mean.line()
     p = preset("tuttle-joint1").set("friction.placement", "output")
     cur = np.array([3.2, 3.6])
-    biased = R.step_runs(p, cur).torque_mean
-    assert np.all(biased > 10.0), biased
-    peak = item.checks[1]  # reported against Tuttle's 80 N m; see results/fidelity
-    assert "N m" in peak.model
+    runs = R.step_runs(p, cur)
+    assert np.all(runs.torque_mean > 10.0), runs.torque_mean
+    # the output's inertial torque has no such bias: the friction is not in it
+    assert np.all(runs.inertial_peak < runs.torque_peak), (runs.inertial_peak, runs.torque_peak)
+
+
+@pytest.mark.xfail(strict=True, reason="held-out check fails: the plateau's vibration is set by "
+                   "the power balance against the Coulomb-like tooth drag, so its peak grows with "
+                   "the current (54 -> 159 N m over 2.8-4.0 A); Tuttle's 80 N m needs the "
+                   "dissipation his models place on the output side of the compliance, which "
+                   "the presets' calibration does not yet carry (see results/fidelity, T3)")
+def test_joint1_torque_sensor_peak(joint1_torque_item) -> None:
+    """T3: the largest |torque| over the plateau currents in 60-110 N m (Tuttle: 80 N m)."""
+    peak = joint1_torque_item.checks[1]
+    assert peak.passed, peak.line()
 
 
 def test_joint2_and_joint3_steps_items(tmp_path) -> None:

@@ -393,6 +393,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
                 if s_new != s:  # reversal: remember where, how much and the load there
                     x[HZ] = dth - d_inc
                     x[HZ + 1] = x[HZ + 3]
+                    x[HZ + 5] = 1.0 if s == 0.0 else 0.0  # the first move stays virgin
                     x[HZ + 2] = s_new
                     s = s_new
                     load = a_k
@@ -400,7 +401,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
             if hyst_on:
                 dts = x[HZ + 1]
                 gam = p[TANH_G] + p[TANH_G1] * load
-                gam = gam if gam > 0.0 else 0.0
+                gam = (1.0 + x[HZ + 5]) * gam if gam > 0.0 else 0.0  # virgin curve: 2 gamma
                 t_h = dts + (s * (p[TANH_B] + p[TANH_B1] * load) - dts) * math.tanh(
                     gam * s * (dth - x[HZ]))
                 x[HZ + 3] = t_h

@@ -237,6 +237,7 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
             if s_new != s:  # reversal: remember where, how much and the load there
                 _s(w, hz, j, dth - d_inc)
                 _s(w, hz + 1, j, _g(w, hz + 3, j))
+                _s(w, hz + 5, j, 1.0 if s == 0.0 else 0.0)  # the first move stays virgin
                 _s(w, hz + 2, j, s_new)
                 s = s_new
                 load = a_k
@@ -246,7 +247,8 @@ def _tanh_hysteresis(w: np.ndarray, nl: int) -> None:
         if _g(w, TANH_ON, j) == 0.0:
             continue
         dts = _g(w, hz + 1, j)
-        gam = max(_g(w, TANH_G, j) + _g(w, TANH_G1, j) * load, 0.0)
+        # virgin curve: twice the shape factor (eq. H1, Masing's rule)
+        gam = (1.0 + _g(w, hz + 5, j)) * max(_g(w, TANH_G, j) + _g(w, TANH_G1, j) * load, 0.0)
         t_h = dts + (s * (_g(w, TANH_B, j) + _g(w, TANH_B1, j) * load) - dts) * math.tanh(
             gam * s * (dth - _g(w, hz, j)))
         _s(w, hz + 3, j, t_h)

@@ -26,7 +26,8 @@ W_MOTOR = 8  # work done by the motor torque, J
 W_LOAD = 9  # work done on the joint by the external load, J
 T_LOAD = 10  # external load torque last applied, N m (resists positive motion)
 T_MOTOR = 11  # motor torque last applied, N m
-HZ = 12  # hysteresis memory: Maxwell-slip forces, or tanh (phi*, dT*, s, T_h, load history L)
+HZ = 12  # hysteresis memory: Maxwell-slip forces, or tanh (phi*, dT*, s, T_h, load history L,
+#         virgin: 1 until the first reversal, docs/physics.md eq. H1)
 N_STATE = HZ + MAX_SLIP_ELEMENTS
 
 STATE_NAMES = (
@@ -214,7 +215,8 @@ def initial_state(rows: np.ndarray, flags: np.ndarray | int,
     x[:, TH_M] = th_m
     x[:, TH_O] = th_o
     x[:, DTH] = th_m / rows[:, RATIO] - th_o - ke
-    x[:, HZ] = np.where(rows[:, HMODEL] == 1, x[:, DTH], 0.0)  # tanh: last reversal at start
-    x[:, HZ + 2] = np.where(rows[:, HMODEL] == 1, 1.0, 0.0)
+    # tanh: the branch starts here, in no direction yet, on the virgin curve (eq. H1)
+    x[:, HZ] = np.where(rows[:, HMODEL] == 1, x[:, DTH], 0.0)
+    x[:, HZ + 5] = np.where(rows[:, HMODEL] == 1, 1.0, 0.0)
     return x
 

@@ -158,11 +158,14 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     x[:, L.HZ + 4] = np.where(tanh_memory, load, x[:, L.HZ + 4])
     x[:, L.HZ] = np.where(rev, dth - d_inc, x[:, L.HZ])
     x[:, L.HZ + 1] = np.where(rev, x[:, L.HZ + 3], x[:, L.HZ + 1])
+    # virgin until the first reversal: the first move (from no direction, s = 0) stays virgin
+    x[:, L.HZ + 5] = np.where(rev, np.where(s == 0.0, 1.0, 0.0), x[:, L.HZ + 5])
     x[:, L.HZ + 2] = np.where(rev, s_new, s)
     s = x[:, L.HZ + 2]
     dts = x[:, L.HZ + 1]
     width = p[:, L.TANH_B] + p[:, L.TANH_B1] * load
-    gam = np.maximum(p[:, L.TANH_G] + p[:, L.TANH_G1] * load, 0.0)
+    # eq. H1: the virgin curve has twice the shape factor (Masing's rule)
+    gam = (1.0 + x[:, L.HZ + 5]) * np.maximum(p[:, L.TANH_G] + p[:, L.TANH_G1] * load, 0.0)
     th_tanh = dts + (s * width - dts) * np.tanh(gam * s * (dth - x[:, L.HZ]))
     x[:, L.HZ + 3] = np.where(tanh_model, th_tanh, x[:, L.HZ + 3])
     t_h = np.where(tanh_model, th_tanh, t_h)

@@ -137,6 +137,8 @@ class StepRuns:
         wg_speed: WG speed of every step at every control period, rad/s, ``(n, n_currents)``.
         torque: flexspline torque likewise, N m.
         ctrl_dt: control period, s.
+        inertial_peak: largest |J_o d(omega_o)/dt| in the window (the output's inertial
+            torque over each control period, plus the load), N m.
     """
 
     currents: np.ndarray
@@ -147,6 +149,7 @@ class StepRuns:
     wg_speed: np.ndarray
     torque: np.ndarray
     ctrl_dt: float
+    inertial_peak: np.ndarray | None = None
 
 
 def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],
@@ -181,6 +184,7 @@ def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[f
     start = n - int(round(average / dt))
     w = np.empty((n, currents.size))
     tk = np.empty((n, currents.size))
+    wo = np.empty((n, currents.size))
     step = kernel.step_parallel if currents.size > 2 else kernel.step_serial
     for k in range(n):
         step(xs, ps, currents, zero, dt / n_sub, n_sub, fl, bad)
@@ -189,11 +193,16 @@ def step_runs(p: JointParams | list[JointParams], currents: np.ndarray | tuple[f
                                f"{currents[np.argmax(bad)]} A")
         w[k] = xs[:, L.W_M]
         tk[k] = xs[:, L.TK]
+        wo[k] = xs[:, L.W_O]
     ww, tw = w[start:], tk[start:]
+    j_o = np.array([q.load.inertia for q in plist])
+    # the output's inertial torque per control period (from rest), plus the load
+    acc = np.diff(np.vstack([np.zeros((1, currents.size)), wo]), axis=0)[start:] / dt
+    inertial = j_o * acc + np.array([q.load.torque for q in plist])
     speed = ww.mean(axis=0)
     return StepRuns(currents=currents, speed=speed, torque_mean=tw.mean(axis=0),
                     torque_peak=np.abs(tw).max(axis=0), torque_std=tw.std(axis=0), wg_speed=w,
-                    torque=tk, ctrl_dt=dt)
+                    torque=tk, ctrl_dt=dt, inertial_peak=np.abs(inertial).max(axis=0))
 
 
 def step_table(p: JointParams | list[JointParams], currents: np.ndarray | tuple[float, ...],

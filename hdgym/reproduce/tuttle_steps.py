@@ -217,8 +217,10 @@ def check_joint1_torque(out: Path, quick: bool) -> Item:
                 "largest |torque| over the plateau currents in 60-110 N m; for information, "
                 "the same with the transmission friction placed between output and ground "
                 "(friction.placement = output)",
-                role="held-out check: no number was tuned on it (the friction placement follows "
-                     "Tuttle's text, §3 p. 113)")
+                role="held-out check: no number was tuned on it (the friction sits in the mesh "
+                     "where Tuttle's text puts it, §3 p. 113, but on the grounded side of the "
+                     "compliance, where his models 4 and 5 have it on the output side: "
+                     "docs/physics.md eq. 8)")
     p = preset("tuttle-joint1")
     cur = np.array(STEP_CURRENTS)
     runs, pl = _joint1_plateau(p)
@@ -256,6 +258,14 @@ def check_joint1_torque(out: Path, quick: bool) -> Item:
                         f"{runs_alt.torque_peak[k]:.0f} N m" for k in range(a2, b2 + 1)))
     else:
         item.measured.append("for information, placement = output: no plateau")
+    item.measured.append(
+        "for information, the same run (placement = output) read as Tuttle's models 4 and 5 "
+        "would: friction between the splines on the output side of the compliance, the "
+        "sensor on the grounded spline reading the output's inertial torque J_o dω_o/dt; "
+        "its peak at " + ", ".join(f"{cur[k]:g}" for k in range(a, b + 1)) + " A: "
+        + " / ".join(f"{runs_alt.inertial_peak[k]:.0f}" for k in range(a, b + 1))
+        + " N m (the preset's currents; K_t and damping were calibrated for the mesh "
+        "placement, and with it the joint-1 speeds no longer form T2's plateau)")
     plt = plt_module()
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5), sharey=True)
     t = np.arange(runs.torque.shape[0]) * runs.ctrl_dt
