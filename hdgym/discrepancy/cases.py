@@ -303,8 +303,8 @@ def main(argv: list[str] | None = None) -> int:
         "than the horizon (a friction ripple once per output turn slowly changes the speed) "
         "is exactly such a drift; an effect found there must halve the validation NMSE "
         "(`ESCALATED_GAIN`), and before and after are then reported on that horizon. "
-        "Trial refits also start from a Gauss-Newton step of "
-        "the ranking's linearized refit (order lines start at zero amplitude). Locked-output "
+        "There, trial refits of order-line candidates also start from a Gauss-Newton step "
+        "of the ranking's linearized refit (they start at zero amplitude). Locked-output "
         "records restart too (the motor angle and speed; the output stays clamped).",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "
@@ -313,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym experiment ...`) whose record would show it; so is one that, at the size the "
         "record suggests, would change the channels by less than their measurement noise. "
         "*Outcome* is *named*, *nothing missing* (final NMSE within 3 x the measurement-noise "
-        "NMSE, or at most 0.5 % while no candidate explains 3 % of it) or *unexplained*; a "
+        "NMSE, or at most 0.5 %) or *unexplained*; a "
         "named effect that leaves more than that is *named; rest unexplained*.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "

@@ -318,7 +318,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "*honest* when the outcome says \"unexplained\" or the hidden effect is listed "
              "as untestable on the record. Outcomes: *named*; *nothing missing* when the final "
              f"NMSE is within {NOISE_FACTOR:g} x the measurement-noise NMSE, or at most "
-             f"{RESOLVED:g} % while no candidate of the last ranking explains 3 % of it "
+             f"{RESOLVED:g} % "
              "(`hdgym.discrepancy.outcome.NOISE_FACTOR`, `RESOLVED`, set on the tuned cases); "
              "*unexplained* otherwise (*named; rest unexplained* when an effect was named but "
              "what remains is above that level). The prediction horizon is chosen per record "

@@ -14,30 +14,24 @@ NOISE_FACTOR = 3.0
 
 
 def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
-               untestable_why: dict[str, str], given: JointParams,
-               min_score: float = 0.03) -> tuple[str, list[str]]:
+               untestable_why: dict[str, str], given: JointParams) -> tuple[str, list[str]]:
     """The honest outcome and the experiments that would decide what this record cannot.
 
     Args:
         steps: the effects added; final: the final NMSE, percent (validation record when
         there is one); noise: its measurement-noise NMSE, percent; candidates: the last
-        ranking; untestable_why: effect -> what the record lacks; given: the base model;
-        min_score: the share of the residual a candidate must explain to be tried
-        (:data:`.workflow.MIN_SCORE`).
+        ranking; untestable_why: effect -> what the record lacks; given: the base model.
 
     *named* when an effect was added (each had to cut the gap); else *nothing missing*
     when the final NMSE is at the noise level (:data:`NOISE_FACTOR` x the measurement-noise
     NMSE) or resolved (:data:`RESOLVED`: fit slack and restart errors keep complete models
-    above the noise) while no candidate of the last ranking explains ``min_score`` of it (a
-    residual above the noise that a known effect partly explains is not slack); else
-    *unexplained*. A named effect that leaves a
+    above the noise); else *unexplained*. A named effect that leaves a
     residual above that level is *named; rest unexplained*: the gap shrank, but what remains
     is not noise and no further candidate explains it. The next experiments: the
     identification protocol of every untestable effect that is not in the model, and, for an
     unexplained residual, of the two best-ranked candidates.
     """
-    structured = any(c.get("score", 0.0) >= min_score for c in candidates)
-    resolved = final <= NOISE_FACTOR * noise or (final <= RESOLVED and not structured)
+    resolved = final <= max(NOISE_FACTOR * noise, RESOLVED)
     if steps:
         outcome = "named" if resolved else "named; rest unexplained"
     elif resolved:

@@ -112,9 +112,11 @@ def _newton_start(problem: Problem, q: JointParams, on: np.ndarray,
     """One Gauss-Newton step from ``q`` (the candidate on at its start, residual ``on``)
     over the columns ``cols`` (base parameters at the current fit, the candidate's at ``q``),
     clipped to the bounds: a start for the trial refit of order-line candidates (kinematic
-    error, friction ripple), whose sine and cosine terms start at zero where the size grid of
-    :func:`_start` cannot size them, and which a long horizon couples to the friction level
-    the base fit shifted to mimic their mean."""
+    error, friction ripple) at an escalated horizon (:func:`_escalate`), whose sine and
+    cosine terms start at zero where the size grid of :func:`_start` cannot size them, and
+    which a long horizon couples to the friction level the base fit shifted to mimic their
+    mean. (At the chosen horizon the grid start alone fits them better: on the tuned
+    kinematic-error case the step's start led the fit to a worse optimum.)"""
     if not cols:
         return None
     X = np.column_stack([c for _, _, c in cols])
@@ -140,7 +142,7 @@ def _set(p: JointParams, path: str, value: float) -> JointParams:
 
 
 def rank_candidates(problem: Problem, current: JointParams,
-                    anchor: JointParams | None = None) -> list[dict]:
+                    anchor: JointParams | None = None, newton: bool = False) -> list[dict]:
     """Every effect that is off, testable and whose requirements are on, scored two ways.
 
     ``signature_explained``: fraction of the residual energy the effect's
@@ -187,7 +189,7 @@ def rank_candidates(problem: Problem, current: JointParams,
             cols = [c for *_, c in base_cols] + [on - r0] + [c for *_, c in own]
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
-            if any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
+            if newton and any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
                 # order lines: the size grid of _start cannot size them (they start at zero)
                 newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
         except (SimulationError, ValueError):
@@ -274,17 +276,16 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     # where stick-slip makes the cost at a start a poor guide, the better of both fits
     q = _start(problem, current.params, cand["name"])
     q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
-    starts = [(problem.nmse(s)["mean"], k, s) for k, s in enumerate((q, q2))]
-    q3 = cand.get("_newton")  # a Gauss-Newton step from the ranking (see _newton_start)
-    if q3 is not None and (c3 := problem.nmse(q3)["mean"]) < min(c for c, *_ in starts):
-        starts.append((c3, 2, q3))
-    if problem.stick_slip:
-        fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
-                for *_, s in starts]
-        res = min(fits, key=lambda f: f.cost)
+    if problem.stick_slip:  # the cost at a start is a poor guide: fit from both
+        starts = [q, q2]
     else:
-        q = min(starts, key=lambda t: t[:2])[2]
-        res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
+        starts = [min((q, q2), key=lambda s: problem.nmse(s)["mean"])]
+    q3 = cand.get("_newton")  # order lines: also from a Gauss-Newton step (_newton_start)
+    if q3 is not None:
+        starts.append(q3)
+    fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
+            for s in starts]
+    res = min(fits, key=lambda f: f.cost)
     rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
     cand["trial_nmse"] = res.nmse["mean"]
     cand["relative_improvement"] = rel
@@ -327,15 +328,17 @@ def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | Non
 
 def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
             base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int,
-            vgain: float = VALIDATION_GAIN) -> tuple[tuple | None, str, list[dict]]:
+            vgain: float = VALIDATION_GAIN, newton: bool = False
+            ) -> tuple[tuple | None, str, list[dict]]:
     """One round: rank the candidates, trial-refit the best, accept the first that passes
-    (``vgain``: the share by which it must cut the validation NMSE).
+    (``vgain``: the share by which it must cut the validation NMSE; ``newton``: order-line
+    candidates also start from a Gauss-Newton step, :func:`_newton_start`).
 
     Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
     relative improvement)`` or None, ``reason`` why nothing passed.
     """
     params = given
-    candidates = rank_candidates(problem, current.params, params)
+    candidates = rank_candidates(problem, current.params, params, newton)
     if not candidates:
         return None, "every testable effect is already in the model", candidates
     trials = []
@@ -442,7 +445,7 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
         if not (cur.nmse["mean"] > DRIFT * base and cur.nmse["mean"] - base > floor):
             continue
         accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
-                                          nfev_trial, nfev_polish, ESCALATED_GAIN)
+                                          nfev_trial, nfev_polish, ESCALATED_GAIN, True)
         if accepted is not None:
             return accepted, candidates, cur
     problem.segment = h0
@@ -588,7 +591,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, params, MIN_SCORE)
+                                untestable_why, params)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
