@@ -497,7 +497,7 @@ def real_result():
 def test_real_sweep_names_position_dependent_friction(real_result):
     d = real_result.diagnosis
     assert d.missing_effects[:1] == ["position_dependent_friction"]
-    assert d.outcome == "named"
+    assert d.outcome.startswith("named")  # real data: a remainder above the noise stays
     assert real_result.train.startswith("legs 1-2") and real_result.validate.startswith("legs 3-4")
     amps = {r.order: r.amplitude for r in d.after.params.friction.output.ripple}
     assert 1.0 < amps[1.0] < 1.8 and 0.5 < amps[2.0] < 1.2
