@@ -89,7 +89,10 @@ def _posdep_on(p, s):
     for o in RIPPLE_ORDERS:
         amp, ph = _harmonic_guess(s.ripple, o) if side == "output" else (0.0, 0.0)
         rip.append({"order": o, "amplitude": amp, "frame": "input", "phase": ph})
-    if s.wg_turns / p.ratio >= OUTPUT_TURNS:
+    if s.wg_turns / p.ratio >= OUTPUT_TURNS and not s.inverse:
+        # (not in the torque-domain comparison of closed-loop records: their angles count
+        # from each run's start and the rotor zero is the one per-run nuisance re-estimated
+        # when a fit is carried to another run, see .realdata.cross_record)
         rip += [{"order": o, "amplitude": 0.0, "frame": "output", "phase": 0.0}
                 for o in OUTPUT_RIPPLE_ORDERS]
     d: dict[str, Any] = {f"@friction.{side}.ripple": rip}
