@@ -71,6 +71,12 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "",
         "What limits the results (from the runs below and the diagnostics behind them):",
         "",
+        "- Since the previous page the controllers changed, not the Tuttle physics: the KE "
+        "feedforward's torque term adds the mesh friction and its offset is taken on the "
+        "true output, and the DOB wraps a PD instead of the PID. The row \"PID + DOB\" "
+        "(the DOB as before) stays in the load-step tables beside \"PD + DOB\" (as now), "
+        "and the tracking tables gain \"KE ff., sensor torque only\" (the feedforward as "
+        "before, offset apart). The table at the end of the page lists what moved.",
         "- The transmission friction acts in the tooth mesh (`friction.placement = "
         "\"mesh\"`, Tuttle §3 models 2 and 5), where the flexspline torque sensor does not "
         "read it, but the motor feels it through the gear factor g = 1/ratio − θ_ke'(θ_wg) "
