@@ -13,10 +13,14 @@ The law, sampled every ``dt`` s::
              kd s/(tf s + 1); x = -measurement or e, see ``derivative_on``)
     I     += ki dt e + dt/tt (u - v)                  (back-calculation), or
     I     += ki dt e  unless u is saturated and e pushes further (clamping)
+
+With ``ki = 0`` the integral stays where it is (a PD law): back-calculation
+alone would otherwise turn saturation into a lasting offset.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -117,7 +121,9 @@ class PID:
         self._x_prev = x
         v = self.kp * e + self.integral + self.derivative + feedforward
         u = min(max(v, self.u_min), self.u_max)
-        if self.anti_windup == "back_calculation":
+        if self.ki == 0.0:
+            pass  # no integral action: nothing to wind up (back-calculation would make one)
+        elif self.anti_windup == "back_calculation":
             self.integral += self.ki * self.dt * e + self.dt / self.tt * (u - v)
         elif self.anti_windup == "clamping":
             pushing = (u >= self.u_max and e > 0) or (u <= self.u_min and e < 0)
@@ -171,6 +177,18 @@ class PositionPID:
         self._ref.reset()
         if self.loop_filter is not None:
             self.loop_filter.reset()
+
+    def without_integral(self) -> PositionPID:
+        """A fresh copy with ``ki = 0`` (a PD law; same filter and feedforward).
+
+        For an outer loop around a disturbance observer, which already acts
+        as integral action: a second integrator makes the loop hunt against
+        static friction.
+        """
+        pd = copy.deepcopy(self)
+        pd.pid.set_gains(pd.pid.kp, 0.0, pd.pid.kd)
+        pd.reset()
+        return pd
 
     def __call__(self, t: float, measurement: Measurement) -> float:
         ref = measurement["reference"]

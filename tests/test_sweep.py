@@ -246,6 +246,68 @@ def test_local_sweep_writes_resumes_and_summarizes(tmp_path: Path, spec_file: Pa
     assert (out / "summary.png").stat().st_size > 10_000
 
 
+def test_physics_fingerprint_follows_numbers_and_sources_not_notes(monkeypatch) -> None:
+    from hdgym.sweep import job as J
+
+    p = P.preset("tuttle-joint1")
+    fp = J.physics_fingerprint(p)
+    assert fp == J.physics_fingerprint(P.preset("tuttle-joint1"))
+    assert J.physics_fingerprint(p.set("compliance.damping", 8.5)) != fp
+    assert J.physics_fingerprint(p.without("hysteresis")) != fp
+    notes = P.from_dict({**P.to_dict(p), "sources": {"motor.inertia": "another note"}})
+    assert J.physics_fingerprint(notes) == fp
+    # the physics sources are part of it
+    monkeypatch.setattr(J, "_sources_digest", lambda: "edited")
+    assert J.physics_fingerprint(p) != fp
+
+
+def test_resume_recomputes_rows_made_on_other_physics(tmp_path: Path, spec_file: Path,
+                                                       monkeypatch) -> None:
+    """A changed preset number or physics source: the rows made before are moved to
+    results.stale.csv and their jobs run again; the other preset's rows stay done."""
+    from hdgym.sweep import job as J
+
+    out = tmp_path / "run"
+    res = run_sweep(spec_file, out, workers=1, progress=False, summarize=False)
+    assert (res.ran, res.stale) == (16, 0)
+    first = _rows(out)
+    assert {r["physics"] for r in first.values() if r["preset"] == "tuttle-joint1"} == {
+        J.physics_fingerprint(P.preset("tuttle-joint1"))}
+
+    # the file drive's stiffness changes: its 8 rows are stale, tuttle-joint1's stay done
+    P.save(make_joint().set("compliance.stiffness", 1.1 * make_joint().compliance.stiffness),
+           spec_file.with_name("drive.toml"))
+    res = run_sweep(spec_file, out, workers=1, progress=False)
+    assert (res.skipped, res.ran, res.stale) == (8, 8, 8)
+    now = _rows(out)
+    assert len(now) == 16
+    _, stale = read_rows(out / "results.stale.csv")
+    assert {r["job_id"] for r in stale} == {k for k, r in first.items()
+                                            if r["preset"] != "tuttle-joint1"}
+    assert not set(now) & {r["job_id"] for r in stale}
+    md = (out / "summary.md").read_text()
+    assert "16 jobs (0 failed)" in md  # the summary counts only rows on today's physics
+
+    # the physics code changes: every row is recomputed
+    J._fingerprint_of.cache_clear()
+    monkeypatch.setattr(J, "_sources_digest", lambda: "edited physics")
+    res = run_sweep(spec_file, out, workers=1, progress=False, summarize=False)
+    assert (res.skipped, res.ran, res.stale) == (0, 16, 16)
+    J._fingerprint_of.cache_clear()
+
+    # rows written before the physics column existed count as other physics
+    monkeypatch.undo()
+    res = run_sweep(spec_file, out, workers=1, progress=False, summarize=False)
+    assert res.stale == 16
+    header, rows = read_rows(out / "results.csv")
+    with (out / "results.csv").open("w", newline="") as fh:
+        w = csv.DictWriter(fh, [c for c in header if c != "physics"], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    res = run_sweep(spec_file, out, workers=1, progress=False, summarize=False)
+    assert (res.stale, res.ran) == (16, 16)
+
+
 def test_failing_job_is_a_row_not_a_crash(tmp_path: Path, spec_file: Path) -> None:
     @register("boom_for_test", options={})
     def boom(params, job):  # noqa: ANN001

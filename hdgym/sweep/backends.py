@@ -31,7 +31,7 @@ BACKENDS = ("local", "ray")
 
 #: columns every row has, in this order; then ``param:``/``scale:`` columns, then metrics
 FIXED_COLUMNS = ("job_id", "status", "preset", "scenario", "controller", "seed", "quick",
-                 "hdgym_version", "elapsed_s", "error", "inputs")
+                 "physics", "hdgym_version", "elapsed_s", "error", "inputs")
 
 
 def _version() -> str:
@@ -55,7 +55,7 @@ def run_job(job: Job) -> dict[str, Any]:
     row: dict[str, Any] = {
         "job_id": job.job_id, "status": "ok", "preset": job.preset, "scenario": job.scenario,
         "controller": job.label, "seed": job.seed, "quick": job.quick,
-        "hdgym_version": _version(), "elapsed_s": None, "error": "",
+        "physics": inputs["physics"], "hdgym_version": _version(), "elapsed_s": None, "error": "",
         "inputs": json.dumps(inputs, sort_keys=True, separators=(",", ":")),
     }
     try:

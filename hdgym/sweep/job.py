@@ -1,20 +1,33 @@
 """A sweep's unit of work: :class:`Job` (plain data, hashed into its id) and how
 a job's randomized drive is drawn from its preset, grid point and spreads
-(:func:`draw_params`)."""
+(:func:`draw_params`).
+
+A job's id also hashes the physics it runs on (:func:`physics_fingerprint`:
+the simulator's physics and sensor sources and the resolved parameters of
+its preset), so a row computed before a physics or preset change is not
+taken as done by a resumed sweep."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field, is_dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hdgym import params as P
 
-__all__ = ["LEVEL_FIELDS", "Job", "as_param", "draw_params", "scale_level", "stable_hash"]
+__all__ = ["LEVEL_FIELDS", "PHYSICS_SOURCES", "Job", "as_param", "draw_params",
+           "physics_fingerprint", "scale_level", "stable_hash"]
+
+_HDGYM = Path(__file__).resolve().parent.parent
+#: the sources that decide a simulated trajectory, relative to the hdgym package:
+#: the physics step (every implementation) and the sensors and action scaling
+PHYSICS_SOURCES = ("physics", "hardware.py")
 
 # A spread on a part (not a leaf) scales that part's *level* with one common
 # factor, keeping its internal constraints (breakaway >= coulomb, ripple <=
@@ -33,6 +46,38 @@ def stable_hash(obj: Any, n: int = 16) -> str:
     """Hex digest of the canonical JSON of ``obj`` (sorted keys, no spaces)."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return hashlib.sha256(text.encode()).hexdigest()[:n]
+
+
+@functools.lru_cache(maxsize=1)
+def _sources_digest() -> str:
+    h = hashlib.sha256()
+    for name in PHYSICS_SOURCES:
+        path = _HDGYM / name
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        for f in files:
+            h.update(f.relative_to(_HDGYM).as_posix().encode() + b"\0")
+            h.update(f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def physics_fingerprint(p: P.JointParams) -> str:
+    """16 hex digits naming the physics a run of ``p`` sees.
+
+    Hashes the sources in :data:`PHYSICS_SOURCES` and the resolved parameters
+    of ``p`` (every number and the effects; not its name, description or
+    source notes): a change to the physics code, the sensors or a preset's
+    numbers changes it.
+    """
+    d = P.to_dict(p)
+    d.pop("meta", None)
+    d.pop("sources", None)
+    return stable_hash({"sources": _sources_digest(), "params": d})
+
+
+@functools.lru_cache(maxsize=64)
+def _fingerprint_of(preset: str, params_toml: str | None) -> str:
+    base = P.loads(params_toml, preset) if params_toml is not None else P.preset(preset)
+    return physics_fingerprint(base)
 
 
 def _seed_words(digest: str) -> list[int]:
@@ -62,14 +107,19 @@ class Job:
     workdir: str | None = field(default=None, compare=False)
 
     def inputs(self) -> dict[str, Any]:
-        """What defines the job (hashed into :attr:`job_id`)."""
+        """What defines the job (hashed into :attr:`job_id`), its physics included."""
         out = {"preset": self.preset, "scenario": self.scenario, "seed": self.seed,
                "grid": dict(self.grid), "spreads": dict(self.spreads),
                "options": dict(self.options), "controller": self.controller,
-               "agent": self.agent, "quick": self.quick}
+               "agent": self.agent, "quick": self.quick, "physics": self.physics}
         if self.params_toml is not None:
             out["params_sha256"] = hashlib.sha256(self.params_toml.encode()).hexdigest()
         return out
+
+    @property
+    def physics(self) -> str:
+        """:func:`physics_fingerprint` of the job's base drive (before grid and spreads)."""
+        return _fingerprint_of(self.preset, self.params_toml)
 
     @property
     def job_id(self) -> str:

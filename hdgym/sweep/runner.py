@@ -16,6 +16,9 @@ from hdgym.sweep.store import ResultsStore
 __all__ = ["SweepResult", "run_sweep"]
 
 _BUNDLED = resources.files("hdgym.sweep.specs")
+#: where rows computed on other physics (another :func:`~hdgym.sweep.job.physics_fingerprint`
+#: of their preset) go when a sweep resumes
+STALE_FILE = "results.stale.csv"
 
 
 @dataclass(frozen=True)
@@ -24,11 +27,12 @@ class SweepResult:
 
     out_dir: Path
     total: int  # jobs in the spec
-    skipped: int  # already in results.csv
+    skipped: int  # already in results.csv (on the same physics)
     ran: int  # run now
     errors: int  # of those, with status "error"
     seconds: float
     summary: Path | None
+    stale: int = 0  # rows made on other physics, moved to STALE_FILE
 
 
 def _copy_spec(spec: SweepSpec, out_dir: Path) -> None:
@@ -56,6 +60,9 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
         out_dir: gets ``results.csv`` (one row per job), ``spec.toml`` and the
             summary (``summary.md``, ``summary.png``; also
             ``<summary_dir>/<name>.md/.png`` when the spec sets ``summary_dir``).
+            Rows of the spec's presets made on other physics (code, sensors or
+            preset numbers; the ``physics`` column) move to ``results.stale.csv``
+            and their jobs run again.
         backend: ``"local"`` (process pool) or ``"ray"``.
         address: Ray cluster address (``None``: start Ray locally).
         workers: processes (local; default ``os.cpu_count()``) or CPUs for a
@@ -97,7 +104,14 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     columns = list(FIXED_COLUMNS) + (param_columns(jobs[0]) if jobs else [])
     t0 = time.perf_counter()
     ran = errors = 0
+    # physics each preset runs on now; rows made on other physics are set aside
+    physics: dict[str, set[str]] = {}
+    for j in jobs:
+        physics.setdefault(j.preset, set()).add(j.physics)
     with ResultsStore(out_dir / "results.csv", columns) as store:
+        stale = store.set_aside(
+            lambda r: r.get("preset") in physics and r.get("physics") not in physics[r["preset"]],
+            out_dir / STALE_FILE)
         todo = [j for j in jobs if j.job_id not in store.done]
         skipped = len(jobs) - len(todo)
         bar = None
@@ -134,7 +148,10 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
                        f"run_sweep('{spec_path}', '{out_dir}', quick=False)\"")
         summary = _summarize(out_dir, command=command, dest=summary_dir)
     if progress:
+        if stale:
+            print(f"sweep {spec.name}: {stale} rows made on other physics moved to "
+                  f"{out_dir / STALE_FILE}")
         print(f"sweep {spec.name}: {len(jobs)} jobs, {skipped} already done, {ran} run "
               f"({errors} errors) in {seconds:.1f} s on {backend}; "
               f"wrote {out_dir / 'results.csv'}" + (f", {summary}" if summary else ""))
-    return SweepResult(out_dir, len(jobs), skipped, ran, errors, seconds, summary)
+    return SweepResult(out_dir, len(jobs), skipped, ran, errors, seconds, summary, stale)

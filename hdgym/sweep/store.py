@@ -16,7 +16,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +100,26 @@ class ResultsStore:
         self.done = {r[self.key] for r in rows}
         if self.dropped or self.header != header:
             self._rewrite(rows)
+
+    def set_aside(self, stale: Callable[[Mapping[str, str]], bool], dest: str | os.PathLike[str]
+                  ) -> int:
+        """Move the rows for which ``stale(row)`` is true to the CSV ``dest`` (appended,
+        kept for reference), so they count neither as done nor in a summary; return how
+        many moved."""
+        _, rows = read_rows(self.path)
+        old = [r for r in rows if stale(r)]
+        if not old:
+            return 0
+        dest = Path(dest)
+        kept_header, kept = read_rows(dest) if dest.is_file() else ([], [])
+        header = kept_header + [c for c in self.header if c not in kept_header]
+        parts = [_line(header)] + [_line([r.get(c, "") for c in header]) for r in kept + old]
+        atomic_write_text(dest, "".join(parts))
+        self._fh.close()
+        self._rewrite(r for r in rows if not stale(r))
+        self._fh = open(self.path, "a", newline="")  # noqa: SIM115 - closed in close()
+        self.done = {r[self.key] for r in rows if not stale(r)}
+        return len(old)
 
     def _rewrite(self, rows: Iterable[Mapping[str, str]]) -> None:
         parts = [_line(self.header)]
