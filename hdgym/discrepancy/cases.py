@@ -17,6 +17,7 @@ import argparse
 import sys
 import time
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,7 @@ from .diagnosis import Diagnosis
 from .effect import Scales
 from .experiments import PROTOCOLS, command
 from .paths import get_value, set_values
+from .pool import ordered_map
 from .registry import REGISTRY, core_params
 from .workflow import MIN_GAIN, THRESHOLD, VALIDATION_GAIN, diagnose
 
@@ -229,19 +231,23 @@ def main(argv: list[str] | None = None) -> int:
                     help="page to write (default %(default)s; the committed page: "
                     "--out results/discrepancy.md; never with --quick)")
     ap.add_argument("--only", nargs="*", help="case names to run")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="diagnose this many cases at once in worker processes (same results; "
+                    "one core each)")
     ap.add_argument("--tuned-only", action="store_true",
                     help="skip the blind and hold-out cases (hdgym.discrepancy.holdout)")
     args = ap.parse_args(argv)
     check_out(args.out, args.quick)
     cases = [c for c in all_cases() if not args.only or c.name in args.only]
     results = []
-    for c in cases:
-        r = run_case(c, quick=args.quick)
+    for c, r in zip(cases, ordered_map(partial(run_case, quick=args.quick), cases, args.jobs),
+                    strict=True):
         print(f"{c.name}: found {r.found or 'none'}, NMSE {r.diagnosis.nmse_before:.3g} -> "
               f"{r.diagnosis.nmse_after:.3g} %, pass {r.passed} ({r.seconds:.1f} s)", flush=True)
         results.append(r)
     cmd = ("python -m hdgym.discrepancy.cases" + (" --quick" if args.quick else "")
-           + (" --tuned-only" if args.tuned_only else "") + f" --out {args.out}")
+           + (" --tuned-only" if args.tuned_only else "")
+           + (f" --jobs {args.jobs}" if args.jobs > 1 else "") + f" --out {args.out}")
     npass = sum(r.passed for r in results)
     text = "\n".join([
         "# Discrepancy workflow: hidden-effect cases",
@@ -287,9 +293,19 @@ def main(argv: list[str] | None = None) -> int:
         "for 30 ms), so a model that breaks away too early or too late still shows it, and a "
         "small speed or phase error cannot build up into a drift no effect explains. The "
         "horizon is chosen per record: the longest of 0.5, 0.2, 0.1, 0.05 and 0.025 s whose "
-        "NMSE with the given model stays within 1.5 x the lowest "
-        "(`hdgym.discrepancy.problem.Problem.choose_horizon`). Locked-output records restart "
-        "too (the motor angle and speed; the output stays clamped).",
+        "NMSE with the fitted base model stays within 1.5 x the lowest "
+        "(`hdgym.discrepancy.problem.Problem.choose_horizon`), and chosen again (never "
+        "longer) with the model each time an effect is added. When the base model shows "
+        "nothing at the chosen horizon, the two shortest longer horizons on which it drifts "
+        "(NMSE above 1.5 x its NMSE at the chosen one, and by more than 3 x the "
+        "measurement-noise NMSE) are searched too "
+        "(`hdgym.discrepancy.workflow._escalate`): an effect that acts over longer stretches "
+        "than the horizon (a friction ripple once per output turn slowly changes the speed) "
+        "is exactly such a drift; an effect found there must halve the validation NMSE "
+        "(`ESCALATED_GAIN`), and before and after are then reported on that horizon. "
+        "There, trial refits of order-line candidates also start from a Gauss-Newton step "
+        "of the ranking's linearized refit (they start at zero amplitude). Locked-output "
+        "records restart too (the motor angle and speed; the output stays clamped).",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "
         "of speeds, the torsion, high or transmitted torque). An effect the record cannot "
@@ -297,7 +313,8 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym experiment ...`) whose record would show it; so is one that, at the size the "
         "record suggests, would change the channels by less than their measurement noise. "
         "*Outcome* is *named*, *nothing missing* (final NMSE within 3 x the measurement-noise "
-        "NMSE or at most 0.5 %) or *unexplained*.",
+        "NMSE, or at most 0.5 %) or *unexplained*; a "
+        "named effect that leaves more than that is *named; rest unexplained*.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "
         "from the measured state, event by event; the ringing at each stop no longer decides "
@@ -350,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.tuned_only:
         from . import holdout
 
-        text += holdout.page_section(quick=args.quick)
+        text += holdout.page_section(quick=args.quick, jobs=args.jobs)
     failed = [r for r in results if not r.passed]
     if failed:
         text += "\nCases that fail (stated, not hidden):\n\n" + "\n".join(

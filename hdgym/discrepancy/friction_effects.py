@@ -27,6 +27,13 @@ from .effect import (
 )
 
 RIPPLE_ORDERS = (1.0, 2.0)
+"""Friction-ripple lines tried at orders of the WG angle."""
+OUTPUT_RIPPLE_ORDERS = (1.0,)
+"""Friction-ripple lines tried at orders of the output angle (once per output turn, as in
+Tuttle's cyclic friction), when the output turns far enough (:data:`OUTPUT_TURNS`)."""
+OUTPUT_TURNS = 0.2
+"""Least output revolutions a record must span to fit a ripple per output turn (over a fifth
+of a turn its sine and cosine still differ from a constant friction level)."""
 
 
 def _sides(s: Scales) -> tuple[str, ...]:
@@ -82,6 +89,12 @@ def _posdep_on(p, s):
     for o in RIPPLE_ORDERS:
         amp, ph = _harmonic_guess(s.ripple, o) if side == "output" else (0.0, 0.0)
         rip.append({"order": o, "amplitude": amp, "frame": "input", "phase": ph})
+    if s.wg_turns / p.ratio >= OUTPUT_TURNS and not s.inverse:
+        # (not in the torque-domain comparison of closed-loop records: their angles count
+        # from each run's start and the rotor zero is the one per-run nuisance re-estimated
+        # when a fit is carried to another run, see .realdata.cross_record)
+        rip += [{"order": o, "amplitude": 0.0, "frame": "output", "phase": 0.0}
+                for o in OUTPUT_RIPPLE_ORDERS]
     d: dict[str, Any] = {f"@friction.{side}.ripple": rip}
     fs = getattr(p.friction, side)
     if fs.coulomb <= 0:
@@ -243,10 +256,10 @@ FRICTION_EFFECTS: tuple[Effect, ...] = (
            channels="breakaway events: held torque and the speed after each start",
            protocol="breakaway_ramps"),
     Effect("position_dependent_friction", "order_lines_speed",
-           "position-dependent friction: friction ripple at orders of the WG angle",
+           "position-dependent friction: friction ripple at orders of the WG (and output) angle",
            _posdep_params, _posdep_on, _posdep_neutral, requires=("coulomb_friction",),
            seen=(FREE, MOVING, TURNS), channels="speed (or current) lines at orders of the WG "
-           "angle", protocol="slow_constant_speed"),
+           "angle; the speed over an output turn", protocol="slow_constant_speed"),
     Effect("load_dependent_friction", "torque_dependence",
            "load-dependent tooth friction: friction grows with the transmitted torque",
            _load_params, _load_on, _load_neutral, requires=("coulomb_friction",),

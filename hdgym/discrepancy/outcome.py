@@ -24,18 +24,22 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
 
     *named* when an effect was added (each had to cut the gap); else *nothing missing*
     when the final NMSE is at the noise level (:data:`NOISE_FACTOR` x the measurement-noise
-    NMSE) or resolved (:data:`RESOLVED`); else *unexplained*. The next experiments: the
+    NMSE) or resolved (:data:`RESOLVED`: fit slack and restart errors keep complete models
+    above the noise); else *unexplained*. A named effect that leaves a
+    residual above that level is *named; rest unexplained*: the gap shrank, but what remains
+    is not noise and no further candidate explains it. The next experiments: the
     identification protocol of every untestable effect that is not in the model, and, for an
     unexplained residual, of the two best-ranked candidates.
     """
+    resolved = final <= max(NOISE_FACTOR * noise, RESOLVED)
     if steps:
-        outcome = "named"
-    elif final <= max(NOISE_FACTOR * noise, RESOLVED):
+        outcome = "named" if resolved else "named; rest unexplained"
+    elif resolved:
         outcome = "nothing missing"
     else:
         outcome = "unexplained"
     names = [n for n in untestable_why if n not in given.effects]
-    if outcome == "unexplained":
+    if outcome.endswith("unexplained"):
         names = [c["name"] for c in candidates[:2]] + names
     protocols = list(dict.fromkeys(REGISTRY[n].protocol for n in names if REGISTRY[n].protocol))
     return outcome, [f"hdgym experiment {p}" for p in protocols]

@@ -20,7 +20,9 @@ NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
 
 The comparison is short-horizon prediction: the model restarts from the measured state every
-horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`).
+horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`)
+and again after each effect added; when nothing is found, the longer horizons on which the
+model drifts are searched too (:func:`_escalate`).
 Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
 list); the rest are listed as untestable with what the record lacks. The outcome is one of
 *named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
@@ -34,19 +36,18 @@ import math
 import time as _time
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from hdgym.params import JointParams
 from hdgym.progress import bar
 from hdgym.record import Record
-from hdgym.sim import SimulationError
 
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .outcome import outcome_of
+from .outcome import NOISE_FACTOR, outcome_of
 from .paths import get_value, set_values
-from .problem import Problem
+from .problem import DRIFT, HORIZONS, Problem
+from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
 
 THRESHOLD = 0.4
@@ -65,159 +66,16 @@ PARSIMONY = 0.75
 """The simpler effect is preferred if it achieves this share of the winner's improvement (on
 the validation record when there is one, see :func:`_simpler_does_nearly_as_well`)."""
 MAX_STEPS = 4
-SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
-"""Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
 FIRST_HORIZON = 0.05
 """Prediction horizon, s, of the base fit before the record's own is chosen."""
+ESCALATE = 2
+"""Longer horizons :func:`_escalate` searches when nothing is found at the chosen one."""
+ESCALATED_GAIN = 0.5
+"""At a longer horizon (:func:`_escalate`) an effect must cut the validation NMSE by half:
+the base model drifts there, and the effect must remove most of that drift (a small gain
+on a drifting comparison is what any extra parameter buys)."""
 FIT_WINDOW = 5.0
 """Seconds of a long record the fits and the ranking use (the cost of a diagnosis)."""
-
-
-def _weighted(problem: Problem, res: dict[str, np.ndarray]) -> tuple[dict, dict]:
-    w = {k: 1.0 / (problem.sigma2[k] * max(r.size, 1)) for k, r in res.items()}
-    return res, w
-
-
-def _stack(problem: Problem, d: dict[str, np.ndarray]) -> np.ndarray:
-    return np.concatenate([d[k] / math.sqrt(problem.sigma2[k] * d[k].size) for k in problem.names])
-
-
-def _columns(problem: Problem, p: JointParams, fps, ref: np.ndarray) -> list[np.ndarray]:
-    """Finite-difference columns of the stacked residual in each of ``fps`` (5 % of range)."""
-    cols = []
-    for fp in fps:
-        v = get_value(p, fp.path)
-        h = 0.05 * (fp.upper - fp.lower) or 1e-9
-        h = h if v + h <= fp.upper else -h
-        try:
-            cols.append(_stack(problem, problem.residuals(_set(p, fp.path, v + h))) - ref)
-        except (SimulationError, ValueError):
-            continue
-    return cols
-
-
-def _set(p: JointParams, path: str, value: float) -> JointParams:
-    return set_values(p, {path: value})
-
-
-def rank_candidates(problem: Problem, current: JointParams,
-                    anchor: JointParams | None = None) -> list[dict]:
-    """Every effect that is off, testable and whose requirements are on, scored two ways.
-
-    ``signature_explained``: fraction of the residual energy the effect's
-    signature regressors explain (linear regression per channel).
-    ``sensitivity_explained``: the larger of the share of the residual
-    energy removed by switching the candidate on at its best coarse-grid
-    start (:func:`_start`) and the share a linearized refit explains (a
-    Gauss-Newton step over the base parameters plus the candidate's own
-    parameters at that start; the base columns alone explain next to
-    nothing at the base optimum, so the difference is what the candidate
-    adds). Candidates are ranked by the
-    sensitivity score (the signature score breaks ties and is reported as
-    evidence).
-    """
-    res = problem.residuals(current)
-    r0 = _stack(problem, res)
-    _, w = _weighted(problem, res)
-    ctx = problem.masked_context()
-    base_cols = _columns(problem, current, model_params(current, problem.scales, anchor), r0)
-    base_frac = R._lstsq_explained(-r0, np.column_stack(base_cols))[0] if base_cols else 0.0
-    out = []
-    for name, eff in REGISTRY.items():
-        if name in current.effects or not eff.testable(problem.scales):
-            continue
-        if any(req not in current.effects for req in eff.requires):
-            continue
-        sig = R.signature(eff.signature, res, w, ctx)
-        sens = 0.0
-        size = math.nan
-        try:  # how much the effect, at the size the record suggests, changes the channels
-            d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
-            size = 100.0 * float(d0 @ d0) / len(problem.names)
-        except (SimulationError, ValueError):
-            pass
-        try:
-            q = _start(problem, current, name)
-            on = _stack(problem, problem.residuals(q))
-            start_gain = 1.0 - float(on @ on) / max(float(r0 @ r0), 1e-300)
-            cols = base_cols + [on - r0] + _columns(problem, q, eff.fit_params(q, problem.scales),
-                                                    on)
-            lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
-            sens = max(lin, start_gain, 0.0)
-        except (SimulationError, ValueError):
-            pass
-        out.append({"name": name, "signature": eff.signature,
-                    "signature_explained": round(sig["explained"], 4),
-                    "sensitivity_explained": round(sens, 4),
-                    "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
-                    "size_nmse": size})
-    out.sort(key=lambda c: -c["score"])
-    return out
-
-
-def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
-    """Switch ``name`` on and pick the cheapest start on a coarse grid of its size.
-
-    Friction with stick-slip makes the cost narrow-valleyed in the static
-    friction level, so a gradient method started far away stalls: every
-    size-like parameter (lower bound 0) is set to the same fraction of its
-    range on a geometric grid (shape parameters such as Maxwell-slip
-    stiffness or the Stribeck velocity take a few values); parameters with
-    a data-based guess (order lines, amplifier limits) are scaled around it.
-    """
-    eff = REGISTRY[name]
-    q = eff.switch_on(p, problem.scales)
-    fps = eff.fit_params(q, problem.scales)
-    shape = [fp for fp in fps if fp.path.endswith(("element_stiffness]", "stribeck_velocity"))
-             or "element_stiffness[" in fp.path]
-    size = [fp for fp in fps if fp not in shape and fp.lower == 0.0]
-    rest = [fp for fp in fps if fp not in shape and fp not in size]
-    trials: list[dict[str, float]] = []
-    # size of the grid: a share of each size parameter's upper bound, or, when the record
-    # gave the sizes (eff.sized), a factor on them
-    sized = eff.sized(problem.scales)
-    unit = {fp.path: get_value(q, fp.path) if sized else fp.upper for fp in size}
-    grid, (lo_f, hi_f) = ((SIZED_GRID, (SIZED_GRID[0], SIZED_GRID[-1])) if sized
-                          else (np.geomspace(1e-3, 0.8, 12), (1e-3, 0.8)))
-    if size:
-        shapes: list[dict[str, float]] = [{}]
-        if any(fp.path.endswith("stribeck_velocity") for fp in shape):
-            shapes = [{fp.path: fp.lower + g * (fp.upper - fp.lower) for fp in shape
-                       if fp.path.endswith("stribeck_velocity")} for g in (0.02, 0.1, 0.4)]
-        for f in grid:
-            for sh in shapes:
-                trials.append({**{fp.path: f * unit[fp.path] for fp in size}, **sh})
-    for f in (0.3, 3.0):
-        vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in rest}
-        if vals:
-            trials.append(vals)
-    def cost(vals: dict[str, float]) -> float:
-        try:
-            return problem.nmse(set_values(q, vals))["mean"]
-        except ValueError:
-            return math.inf
-
-    best_vals: dict[str, float] = {}
-    best_cost = problem.nmse(q)["mean"]
-    for vals in trials:
-        c = cost(vals)
-        if c < best_cost:
-            best_vals, best_cost = vals, c
-    first = size[0].path if size else ""
-    if size and best_vals and unit[first] > 0:
-        # the valley of a static friction level is narrow: refine the common fraction
-        f0 = best_vals[first] / unit[first]
-        sh = {k: v for k, v in best_vals.items() if k not in {fp.path for fp in size}}
-
-        def along(logf: float) -> float:
-            return cost({**{fp.path: math.exp(logf) * unit[fp.path] for fp in size}, **sh})
-
-        step = math.log(hi_f / lo_f) / (len(grid) - 1)
-        opt = minimize_scalar(along, bounds=(math.log(f0) - step, math.log(f0) + step),
-                              method="bounded", options={"maxiter": 12, "xatol": 0.01})
-        if opt.fun < best_cost:
-            best_vals = {**{fp.path: math.exp(opt.x) * unit[fp.path] for fp in size}, **sh}
-    return set_values(q, best_vals) if best_vals else q
 
 
 def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths: list[str],
@@ -228,14 +86,16 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     # where stick-slip makes the cost at a start a poor guide, the better of both fits
     q = _start(problem, current.params, cand["name"])
     q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
-    if problem.stick_slip:
-        fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
-                for s in (q, q2)]
-        res = min(fits, key=lambda f: f.cost)
+    if problem.stick_slip:  # the cost at a start is a poor guide: fit from both
+        starts = [q, q2]
     else:
-        if problem.nmse(q2)["mean"] < problem.nmse(q)["mean"]:
-            q = q2
-        res = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev)
+        starts = [min((q, q2), key=lambda s: problem.nmse(s)["mean"])]
+    q3 = cand.get("_newton")  # order lines: also from a Gauss-Newton step (_newton_start)
+    if q3 is not None:
+        starts.append(q3)
+    fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
+            for s in starts]
+    res = min(fits, key=lambda f: f.cost)
     rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
     cand["trial_nmse"] = res.nmse["mean"]
     cand["relative_improvement"] = rel
@@ -274,6 +134,134 @@ def _reset(p: JointParams, given: JointParams, paths: list[str]) -> JointParams:
 
 def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
     return None if vp is None else vp.nmse(p)
+
+
+def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
+            base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int,
+            vgain: float = VALIDATION_GAIN, newton: bool = False
+            ) -> tuple[tuple | None, str, list[dict]]:
+    """One round: rank the candidates, trial-refit the best, accept the first that passes
+    (``vgain``: the share by which it must cut the validation NMSE; ``newton``: order-line
+    candidates also start from a Gauss-Newton step, :func:`_newton_start`).
+
+    Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
+    relative improvement)`` or None, ``reason`` why nothing passed.
+    """
+    params = given
+    candidates = rank_candidates(problem, current.params, params, newton)
+    if not candidates:
+        return None, "every testable effect is already in the model", candidates
+    trials = []
+    top = candidates[0]["score"]
+    if top < MIN_SCORE:
+        return None, (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
+                      f"% of the residual in a linearized refit (best: "
+                      f"{candidates[0]['name']}, {100 * top:.1f} %)"), candidates
+    for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
+        trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
+    trials.sort(key=lambda t: t[0])
+    # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
+    # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
+    simpler = NESTED.get(trials[0][1]["name"])
+    by_name = {c["name"]: c for c in candidates}
+    if simpler in by_name:
+        if "relative_improvement" not in by_name[simpler]:
+            trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
+                                 nfev_trial))
+        k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
+        if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
+            trials.insert(0, trials.pop(k))
+    accepted = None
+    reasons = []
+    for _, best, res in trials:  # the best candidate that passes every check
+        rel = best["relative_improvement"]
+        gain = current.nmse["mean"] - res.nmse["mean"]
+        if rel < threshold or gain < MIN_GAIN:
+            reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
+                           f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
+                           f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+            continue
+        polished = fit(problem, res.params,
+                       model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
+                       search=True)
+        if polished.cost > res.cost:
+            polished = res
+        if vprob is not None:
+            # hold-out check: an effect that fits the training record better but does not
+            # carry over to the validation record fits noise or the fit's slack; per
+            # channel and scale-free (geometric mean of the NMSE ratios), so a channel
+            # with a tiny variance cannot decide alone
+            v_now = vprob.nmse(current.params)
+            v_new = vprob.nmse(polished.params)
+            ratios = [v_new[k] / v_now[k] for k in vprob.names
+                      if v_now[k] > 0 and math.isfinite(v_now[k])]
+            ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
+                     if ratios else 1.0)
+            if not ratio <= 1.0 - vgain:
+                reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
+                               f"but the validation NMSE only by a factor {ratio:.2f} per "
+                               f"channel (geometric mean; needs <= "
+                               f"{1 - vgain:.2f})")
+                continue
+        accepted = (best, polished, rel)
+        break
+    if accepted is None:
+        return None, "nothing (more) worth adding: " + "; ".join(reasons), candidates
+    return accepted, "", candidates
+
+
+def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
+              base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
+              ) -> tuple[tuple, list[dict], FitResult] | None:
+    """Search again at the longer horizons on which ``current`` drifts.
+
+    The horizon is chosen with the base model (:meth:`.problem.Problem.choose_horizon`): the
+    longest on which it does not drift. A missing effect that acts over longer stretches
+    than that (a friction ripple over an output turn changes the speed slowly) is exactly
+    such a drift, and the short horizon hides it. So when nothing is found at the chosen
+    horizon, the longer horizons on which the model's NMSE exceeds :data:`.problem.DRIFT` x
+    its NMSE at the chosen one, and that by more than the noise level
+    (:data:`.outcome.NOISE_FACTOR` x the measurement-noise NMSE), are searched too: the
+    :data:`ESCALATE` shortest of them (on the longest ones the fit of a drifting model is
+    rough), each after a control refit of the base parameters there (the drift they
+    remove is slack of the base fit). Only while nothing has been named (the horizon is the
+    base model's); an effect found there must pass the same checks and cut the validation NMSE by
+    :data:`ESCALATED_GAIN`, and the diagnosis then stays at that horizon (before and after
+    are both reported on it). Returns ``(accepted, candidates, current at that horizon)``
+    or None (the horizon is left as it was).
+    """
+    h0 = problem.segment
+    base = problem.nmse(current.params)["mean"]
+    costs = getattr(problem, "horizons", {})
+    # a drift within the record's noise level is no evidence of a missing effect (a base
+    # fit some per cent off drifts that much on any record)
+    floor = NOISE_FACTOR * problem.noise["mean"]
+    longer = [h for h in sorted(costs)
+              if h > h0 and costs[h] > DRIFT * base and costs[h] - base > floor]
+    tried = longer[:ESCALATE]
+    for h in tried:
+        problem.segment = h
+        if vprob is not None:
+            vprob.segment = h
+        nm = problem.nmse(current.params)
+        cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+        # control refit at this horizon: what the base parameters alone remove of the drift
+        # is slack of the base fit, not evidence of a missing effect
+        control = fit(problem, cur.params, model_params(cur.params, problem.scales, given),
+                      max_nfev=nfev_trial)
+        if control.cost < cur.cost:
+            cur = FitResult(control.params, {**cur.values, **control.values}, control.nmse,
+                            control.nfev, control.cost)
+        if not (cur.nmse["mean"] > DRIFT * base and cur.nmse["mean"] - base > floor):
+            continue
+        accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
+                                          nfev_trial, nfev_polish, ESCALATED_GAIN, True)
+        if accepted is not None:
+            return accepted, candidates, cur
+    problem.segment = h0
+    if vprob is not None:
+        vprob.segment = h0
+    return None
 
 
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
@@ -329,6 +317,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nm = problem.nmse(before.params)
         before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     current = before
+    chosen = problem.segment
     prog.update(1)
     steps: list[Step] = []
     conclusion = ""
@@ -344,67 +333,18 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                 control.nmse, control.nfev, control.cost)
             if not steps:
                 before = current
-        candidates = rank_candidates(problem, current.params, params)
-        if not candidates:
-            conclusion = "every testable effect is already in the model"
-            break
-        trials = []
-        top = candidates[0]["score"]
-        if top < MIN_SCORE:
-            conclusion = (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
-                          f"% of the residual in a linearized refit (best: "
-                          f"{candidates[0]['name']}, {100 * top:.1f} %)")
-            break
-        for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
-            trials.append(_trial(problem, current, params, base_paths, cand, nfev_trial))
-        trials.sort(key=lambda t: t[0])
-        # parsimony: an effect nested in the winner (its limit case) wins if it does nearly
-        # as well (stiction is Stribeck friction with a vanishing Stribeck velocity)
-        simpler = NESTED.get(trials[0][1]["name"])
-        by_name = {c["name"]: c for c in candidates}
-        if simpler in by_name:
-            if "relative_improvement" not in by_name[simpler]:
-                trials.append(_trial(problem, current, params, base_paths, by_name[simpler],
-                                     nfev_trial))
-            k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
-            if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
-                trials.insert(0, trials.pop(k))
-        accepted = None
-        reasons = []
-        for _, best, res in trials:  # the best candidate that passes every check
-            rel = best["relative_improvement"]
-            gain = current.nmse["mean"] - res.nmse["mean"]
-            if rel < threshold or gain < MIN_GAIN:
-                reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
-                               f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
-                               f"{gain:.3g} points (threshold {MIN_GAIN:g})")
-                continue
-            polished = fit(problem, res.params,
-                           model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
-                           search=True)
-            if polished.cost > res.cost:
-                polished = res
-            if vprob is not None:
-                # hold-out check: an effect that fits the training record better but does not
-                # carry over to the validation record fits noise or the fit's slack; per
-                # channel and scale-free (geometric mean of the NMSE ratios), so a channel
-                # with a tiny variance cannot decide alone
-                v_now = vprob.nmse(current.params)
-                v_new = vprob.nmse(polished.params)
-                ratios = [v_new[k] / v_now[k] for k in vprob.names
-                          if v_now[k] > 0 and math.isfinite(v_now[k])]
-                ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
-                         if ratios else 1.0)
-                if not ratio <= 1.0 - VALIDATION_GAIN:
-                    reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
-                                   f"but the validation NMSE only by a factor {ratio:.2f} per "
-                                   f"channel (geometric mean; needs <= "
-                                   f"{1 - VALIDATION_GAIN:.2f})")
-                    continue
-            accepted = (best, polished, rel)
-            break
+        accepted, reason, candidates = _search(problem, vprob, current, params, base_paths,
+                                               threshold, nfev_trial, nfev_polish)
+        if accepted is None and auto and not problem.inverse and not steps:
+            # nothing at the chosen horizon: an effect that acts over longer stretches (a
+            # friction ripple over an output turn, a slow speed change) shows as the drift
+            # that made the short horizon the choice; look where the current model drifts
+            found = _escalate(problem, vprob, current, params, base_paths, threshold,
+                              nfev_trial, nfev_polish)
+            if found is not None:
+                accepted, candidates, current = found
         if accepted is None:
-            conclusion = "nothing (more) worth adding: " + "; ".join(reasons)
+            conclusion = reason
             break
         best, polished, rel = accepted
         eff = REGISTRY[best["name"]]
@@ -428,10 +368,26 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                           (current.cost - polished.cost) / current.cost, candidates,
                           polished.params))
         current = polished
+        if auto and not problem.inverse:
+            # the horizon again, with the model that now has the effect: the base model may
+            # have needed a short one (or allowed a long one) only because it lacked it
+            # (only shorter: a longer one is taken only where an effect removes the drift,
+            # see _escalate)
+            h_prev = problem.segment
+            problem.choose_horizon(current.params, tuple(h for h in HORIZONS if h <= h_prev))
+            if vprob is not None:
+                vprob.segment = problem.segment
+            if problem.segment != h_prev:
+                nm = problem.nmse(current.params)
+                current = FitResult(current.params, current.values, nm, current.nfev,
+                                    nm["mean"] / 100)
         prog.update(1)
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
     prog.close()
+    if before.nmse is not None and problem.segment != chosen:  # escalated: report on it
+        nm = problem.nmse(before.params)
+        before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
@@ -445,7 +401,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                              untestable_why, params)
+                                untestable_why, params)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
