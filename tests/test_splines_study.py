@@ -55,6 +55,7 @@ def test_proposed_joints_and_the_bundled_names_inside_the_block():
     assert S.proposed("tuttle-joint2", None) == preset("tuttle-joint2")
     p1 = S.proposed("tuttle-joint1")
     assert p1.friction.placement == "splines"
+    assert S.SPLINES_TEXT in p1.description and S.MESH_TEXT not in p1.description
     for path in S.PROPOSED["tuttle-joint1"]:
         assert "T3 held out" in p1.sources[path]
     with S.proposed_presets():

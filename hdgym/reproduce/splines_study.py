@@ -56,6 +56,15 @@ JOINTS = ("tuttle-joint1", "tuttle-joint2", "tuttle-joint3")
 FRICTION_FIELDS = ("coulomb", "breakaway", "viscous", "cubic")
 
 
+#: the bundled Tuttle presets' description of their friction placement, and its proposal
+MESH_TEXT = ("in the tooth mesh between flexspline and circular spline (friction.placement = "
+             "mesh, Tuttle §3 models 2 and 5, p. 113: the flexspline torque sensor does not "
+             "read it)")
+SPLINES_TEXT = ("between flexspline and circular spline on the output side of the compliance "
+                "(friction.placement = splines, Tuttle §3 models 4 and 5, p. 113: the torque "
+                "sensor on the grounded spline does not read it)")
+
+
 def splines_base(name: str) -> JointParams:
     """The bundled preset with the friction between the splines, its base scaled by
     ``1 - mu'`` (step 1 of the method)."""
@@ -284,7 +293,10 @@ def proposed(name: str, values: dict[str, float] | None = None) -> JointParams:
                        f"farthest from a failing one): {v:g}; T3 held out")
         if path == "motor.torque_constant":
             notes["motor.back_emf_constant"] = "chosen: K_b = K_t in SI units"
-    return replace(p, sources=notes)
+    desc = p.description.replace(MESH_TEXT, SPLINES_TEXT)
+    return replace(p, sources=notes, description=desc + (
+        " Proposed by hdgym/reproduce/splines_study.py: friction between the splines, "
+        "K_t and damping recalibrated on T2/T5 (T3 held out)."))
 
 
 @contextmanager
