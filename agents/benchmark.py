@@ -27,8 +27,9 @@ Steps, in order:
    ``runs/rl-quick`` with ``--quick``; the committed page is ``--out
    results/rl``), comparing with the committed ``results/rl/evaluation.json``.
 
-On an idle 2-core machine: each front about 1.5 min, each training run about
-2.5 min, the page about 5 min.
+Measured on the shared 2-core machine (other jobs running): each front 1-2.5 min,
+each training run 1.5-2.5 min, the page 1-3.5 min; the whole command 6-10 min.
+``--quick`` takes well under a minute.
 """
 
 from __future__ import annotations

@@ -354,6 +354,9 @@ def moved(previous: dict[str, Any] | None, now: dict[str, Any]) -> str:
              f"{now.get('commit', 'unknown')}):", "",
              "| variant | rating (N m) | deadline (s) | PPO policy | best classical family | "
              "its success |", "|---|---|---|---|---|---|"]
+    notes = ["The rating and the deadline are set by the rules on this page's front; success "
+             "moves with them (a cap and a deadline that differ by 10 N m or 0.5 s move every "
+             "column) and with any physics change between the two fronts' commits."]
 
     def cell(a: Any, b: Any, fmt: Any) -> str:
         return fmt(b) if a == b else f"{'-' if a is None else fmt(a)} -> {fmt(b)}"
@@ -378,7 +381,7 @@ def moved(previous: dict[str, Any] | None, now: dict[str, Any]) -> str:
                 name, _, spread = key.rpartition(" +-")
                 lines.append(f"| {name}, ±{100 * float(spread):.0f} % | "
                              f"{pct(o['success_by_spread'][key])} -> {pct(v)} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + [""] + notes) + "\n"
 
 
 def verdict(summary: dict[str, Any]) -> str:

@@ -296,14 +296,21 @@ def test_lanes_flag_a_diverged_env_and_leave_the_others():
 
 def _effect_table() -> list[tuple[str, object, bool]]:
     """(label, joint, locked output): every effect alone and every effect left out, each
-    compliance and hysteresis model, both groundings, both friction placements (eq. 8)."""
+    compliance and hysteresis model, both groundings, the three friction placements (eq. 8)."""
     base = make_joint()
     mesh = base.set("friction.placement", "mesh")
+    splines = base.set("friction.placement", "splines")
     rows = [("all effects", base, False), ("no effects", base.without(*EFFECTS), False),
             ("all effects, mesh friction", mesh, False),
             ("all effects, locked", base, True), ("all effects, mesh friction, locked", mesh, True),
             ("circular spline grounded, mesh friction",
-             make_joint(grounded="circular_spline").set("friction.placement", "mesh"), False)]
+             make_joint(grounded="circular_spline").set("friction.placement", "mesh"), False),
+            ("all effects, splines friction", splines, False),
+            ("all effects, splines friction, locked", splines, True),
+            ("circular spline grounded, splines friction",
+             make_joint(grounded="circular_spline").set("friction.placement", "splines"), False),
+            ("tanh hysteresis, splines friction",
+             make_joint("tanh", "cubic").set("friction.placement", "splines"), False)]
     for e in EFFECTS:
         rows.append((f"only {e}", base.without(*(x for x in EFFECTS if x != e)), False))
         rows.append((f"all but {e}", base.without(e), False))
@@ -343,3 +350,37 @@ def test_every_effect_through_all_three_implementations():
     i = [r[0] for r in rows].index("all effects, mesh friction")
     j = [r[0] for r in rows].index("all effects")
     assert xk[i, L.TK] != xk[j, L.TK]
+    # ... and the splines row reads another torque than the output row
+    i = [r[0] for r in rows].index("all effects, splines friction")
+    assert xk[i, L.TK] != xk[j, L.TK]
+
+
+@pytest.mark.parametrize("grounded", ["flexspline", "circular_spline"])
+def test_splines_placement_moves_like_output_and_reads_the_output_inertia(grounded):
+    """docs/physics.md eq. (8): placement splines is the output placement's motion (the
+    friction between the splines acts on the output at the output speed, one spline being
+    grounded), with the state's torque the grounded spline's: J_o dw_o/dt + T_load, blind
+    to the transmission friction (Tuttle §2.6 p. 91, §3 p. 113)."""
+    out = make_joint(grounded=grounded).set("load.torque", 0.3)
+    spl = out.set("friction.placement", "splines")
+    ps = np.stack([L.pack(out), L.pack(spl)])
+    fl = np.full(2, flags_of(out.effects), dtype=np.int64)
+    xs = L.initial_state(ps, fl, 0.3, None)
+    bad = np.zeros(2, dtype=np.bool_)
+    dt, n_sub = 1e-4, 10
+    j_o = out.load.inertia
+    n_friction = 0
+    for k in range(400):
+        u = np.full(2, 4.0 * np.sin(0.02 * k) + 1.0)
+        kernel.step_serial(xs, ps, u, np.zeros(2), dt, n_sub, fl, bad)
+        moving = [L.TH_M, L.W_M, L.TH_O, L.W_O, L.CUR, L.DTH, L.E_DISS]
+        assert np.array_equal(xs[0, moving], xs[1, moving])  # the same motion, to the bit
+        # the spring torque (output placement) and the reading differ by the friction
+        n_friction += abs(xs[0, L.TK] - xs[1, L.TK]) > 1e-3
+    assert not bad.any()
+    assert n_friction > 100  # the friction is there, and the splines reading leaves it out
+    # one substep from the final state: the reading is the output's inertial torque plus load
+    x1 = xs.copy()
+    kernel.step_serial(x1, ps, np.full(2, 1.0), np.zeros(2), dt, 1, fl, bad)
+    acc = (x1[1, L.W_O] - xs[1, L.W_O]) / dt
+    assert x1[1, L.TK] == pytest.approx(j_o * acc + x1[1, L.T_LOAD], rel=1e-9, abs=1e-9)

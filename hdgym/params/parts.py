@@ -284,7 +284,11 @@ class Friction:
             flexspline and circular spline, at the mesh's relative speed
             ``motor_velocity (1/ratio - ke')`` and reflected to the wave
             generator by the same factor (Tuttle §3 models 2 and 5, p. 113:
-            the flexspline torque sensor is blind to it). docs/physics.md eq. (8).
+            the flexspline torque sensor is blind to it); ``splines``: between
+            the splines on the output side of the compliance (Tuttle's models 4
+            and 5): the motion of ``output``, with the state's torque (the
+            sensor) the grounded spline's, ``J_o dw_o/dt + T_load``, blind to the
+            friction. docs/physics.md eq. (8).
     """
 
     input: FrictionSide = field(default_factory=FrictionSide)

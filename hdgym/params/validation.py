@@ -17,7 +17,7 @@ COMPLIANCE_MODELS = ("linear", "cubic", "two_segment", "three_segment")
 HYSTERESIS_MODELS = ("maxwell", "tanh")
 #: where the output side's friction acts: between the output and ground, or in the
 #: tooth mesh between flexspline and circular spline (reflected to the wave generator)
-FRICTION_PLACEMENTS = ("output", "mesh")
+FRICTION_PLACEMENTS = ("output", "mesh", "splines")
 MAX_HARMONICS = 8
 MAX_RIPPLES = 6
 MAX_SLIP_ELEMENTS = 8

@@ -332,7 +332,11 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     nslip = int(p[NSLIP]) if hyst_on and not tanh_model else 0
     startup = p[STARTUP1] if (tanh_model and (flags & LOADDEP)) else 0.0
     mu = p[MU_LOAD] if (flags & LOADDEP) else 0.0
-    mesh = p[MESH] != 0.0
+    mesh = p[MESH] == 1.0
+    # eq. (8), placement splines: the torque sensor reads the grounded spline's torque,
+    # the output's inertial torque plus the load (not with the output locked)
+    sense = p[MESH] == 2.0 and not locked
+    jo_dt = p[J_O] / dt
     amp_on = (flags & AMP) != 0
     imax = p[I_MAX]
     inv_res = 1.0 / p[RES]
@@ -363,6 +367,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     w_motor = x[W_MOTOR]
     w_load = x[W_LOAD]
     t_k = x[TK]
+    t_s = t_k  # the state's torque: T_k, or the grounded spline's torque (eq. 8)
     t_m = x[T_MOTOR]
     t_load = x[T_LOAD]
     for _ in range(n_sub):
@@ -385,7 +390,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
             # Seyfferth eq. 4, load-history parameters: docs/physics.md eqs. H1-H3
             s = x[HZ + 2]
             load = x[HZ + 4]
-            a_k = abs(t_k)  # |transmitted torque| at the previous substep (= T* at a reversal)
+            a_k = abs(t_s)  # |transmitted torque| at the previous substep (= T* at a reversal)
             if a_k > load:
                 load = a_k
             if abs(d_inc) > REVERSAL_DEADBAND:
@@ -458,6 +463,8 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
             lvl = _level(p, FOUT, w_o, mu * abs(t_k), flags, trig, _RIP0[1], nrip_out)
             vis = _visc(vo_mode, vo_b1, vo_b2, vo_pk2, vo_fpk, w_o)
             w_o_new, po = _advance(w_o, t_k - t_load, h_o, vis, lvl)
+        # eq. (8), placement splines: the sensor reads J_o dw_o/dt + T_load
+        t_s = (w_o_new - w_o) * jo_dt + t_load if sense else t_k
         # --- angles eq. (12), bookkeeping eq. (13), the phases of the new angles eq. (1)
         d_m = dt * w_m_new
         d_o = dt * w_o_new
@@ -481,7 +488,7 @@ def substeps(x: np.ndarray, p: np.ndarray, i_cmd: float, t_ext: float, dt: float
     x[TH_O] = th_o
     x[W_O] = w_o
     x[CUR] = cur
-    x[TK] = t_k
+    x[TK] = t_s
     x[DTH] = dth_prev
     x[E_DISS] = e_diss
     x[W_MOTOR] = w_motor

@@ -76,6 +76,8 @@ GRAV = _rows()
 LOAD0 = _rows()
 MU = _rows()
 MESH = _rows()  # 1: the output side's friction acts in the mesh (eq. 8)
+SENSE = _rows()  # 1: the state's torque is the grounded spline's (placement splines, eq. 8)
+JO_DT = _rows()  # output inertia / substep
 K1 = _rows()
 K3 = _rows()
 CMODEL = _rows()  # 0 linear, 1 cubic, 2 two-segment, 3 three-segment
@@ -175,7 +177,9 @@ def prepare_lane(p: np.ndarray, flags: int, dt: float, w: np.ndarray, j: int) ->
     put(w, GRAV, j, p[L.GRAV])
     put(w, LOAD0, j, p[L.LOAD_T])
     put(w, MU, j, p[L.MU_LOAD] if (flags & LOADDEP) else 0.0)
-    put(w, MESH, j, p[L.MESH])
+    put(w, MESH, j, 1.0 if p[L.MESH] == 1.0 else 0.0)
+    put(w, SENSE, j, 1.0 if (p[L.MESH] == 2.0 and not locked) else 0.0)
+    put(w, JO_DT, j, p[L.J_O] / dt)
     k1 = p[L.K1]
     put(w, K1, j, k1)
     put(w, CMODEL, j, p[L.CMODEL] if (flags & NONLIN) else 0.0)

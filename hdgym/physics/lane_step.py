@@ -46,6 +46,7 @@ from hdgym.physics.lane_fields import (
     ICMD,
     IMAX,
     INV_R,
+    JO_DT,
     K0,
     K1,
     K3,
@@ -67,6 +68,7 @@ from hdgym.physics.lane_fields import (
     P_KE,
     P_RIP,
     RESYNC,
+    SENSE,
     SIDE,
     SIN,
     SK2,
@@ -359,7 +361,6 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         # --- transmitted torque: eqs. (3), (6)
         t_k = _spring(w, j, _g(w, T_DTH, j)) + _g(w, CDAMP, j) * _g(w, T_DDTH, j) \
             + _g(w, T_TH, j)
-        _s(w, L.TK, j, t_k)
         # --- amplifier and current loop: eqs. (9), (10)
         w_m = _g(w, L.W_M, j)
         w_o = _g(w, L.W_O, j)
@@ -379,7 +380,7 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         # --- transmission friction (eq. 8): at the output speed, or at the mesh speed
         # w_m * gear and reflected to the WG by gear (placement mesh)
         gear = _g(w, T_GEAR, j)
-        mesh = _g(w, MESH, j) != 0.0
+        mesh = _g(w, MESH, j) != 0.0  # 1 for the mesh placement only (lane_fields)
         v_rel = w_m * gear if mesh else w_o
         lvl_t = _level(w, a_out, j, v_rel, _g(w, T_LOUT, j)) + _g(w, MU, j) * abs(t_k)
         lvl_t = lvl_t if lvl_t > 0.0 else 0.0
@@ -400,6 +401,9 @@ def _drive_and_move(w: np.ndarray, nl: int) -> None:
         w_o_new = 0.0 if locked else w_o_new
         po = 0.0 if locked else po
         _s(w, L.T_LOAD, j, t_load)
+        # eq. (8), placement splines: the sensor reads J_o dw_o/dt + T_load
+        t_s = (w_o_new - w_o) * _g(w, JO_DT, j) + t_load
+        _s(w, L.TK, j, t_s if _g(w, SENSE, j) != 0.0 else t_k)
         # --- angles eq. (12) and bookkeeping eq. (13)
         dt = _g(w, DT, j)
         d_m = dt * w_m_new

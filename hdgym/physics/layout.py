@@ -74,7 +74,8 @@ TANH_B1 = _col("hysteresis.width_slope")
 TANH_G1 = _col("hysteresis.shape_slope")
 STARTUP1 = _col("hysteresis.startup_slope")
 MU_LOAD = _col("friction.load_coefficient")
-MESH = _col("friction.placement")  # 0 output (to ground), 1 mesh (FS-CS, seen by the WG)
+MESH = _col("friction.placement")  # 0 output (to ground), 1 mesh (FS-CS, seen by the WG),
+#                                     2 splines (FS-CS on the output side of the spring)
 NKE = _col("kinematic_error.n_harmonics")
 KE_ORD = _col("kinematic_error.order", MAX_HARMONICS)  # effective order of the WG angle
 KE_AMP = _col("kinematic_error.amplitude", MAX_HARMONICS)
@@ -115,6 +116,8 @@ PARAM_INDEX: dict[str, int] = {n: k for k, n in enumerate(PARAM_NAMES)}
 
 _CMODELS = {"linear": 0, "cubic": 1, "two_segment": 2, "three_segment": 3}
 _HMODELS = {"maxwell": 0, "tanh": 1}
+#: friction.placement -> the MESH column (docs/physics.md eq. 8)
+PLACEMENT_CODES = {"output": 0.0, "mesh": 1.0, "splines": 2.0}
 
 
 def _pack_side(row: np.ndarray, base: int, side: FrictionSide) -> None:
@@ -163,7 +166,7 @@ def pack(p: JointParams) -> np.ndarray:
     row[TANH_G1] = h.shape_slope
     row[STARTUP1] = h.startup_slope
     row[MU_LOAD] = p.friction.load_coefficient
-    row[MESH] = 1.0 if p.friction.placement == "mesh" else 0.0
+    row[MESH] = PLACEMENT_CODES[p.friction.placement]
     _pack_side(row, FIN, p.friction.input)
     _pack_side(row, FOUT, p.friction.output)
     ke = p.kinematic_error.harmonics

@@ -186,9 +186,9 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     startup = np.where(tanh_memory & _on(flags, "load_dependent_friction"),  # eq. H4
                        p[:, L.STARTUP1] * x[:, L.HZ + 4], 0.0)
     mu = np.where(_on(flags, "load_dependent_friction"), p[:, L.MU_LOAD], 0.0)
-    # eq. (8): the transmission friction acts at the output speed (placement output) or at
-    # the mesh speed w_m * gear, reflected to the WG by `gear` (placement mesh)
-    mesh = p[:, L.MESH] != 0.0
+    # eq. (8): the transmission friction acts at the output speed (placements output and
+    # splines) or at the mesh speed w_m * gear, reflected to the WG by `gear` (placement mesh)
+    mesh = p[:, L.MESH] == 1.0
     v_rel = np.where(mesh, w_m * gear, w_o)
     lvl_t = _level(p, L.FOUT, v_rel, th_m, th_o, mu * np.abs(t_k), flags)
     vis_t = _visc(p, L.FOUT, v_rel, flags)
@@ -203,6 +203,9 @@ def substep(xs: np.ndarray, ps: np.ndarray, i_cmd: np.ndarray, t_ext: np.ndarray
     w_o_new = np.where(locked, 0.0, w_o_free)
     po = np.where(locked, 0.0, po)
     x[:, L.T_LOAD] = t_load
+    # placement splines: the state's torque is the grounded spline's, J_o dw_o/dt + T_load
+    sense = (p[:, L.MESH] == 2.0) & ~locked
+    x[:, L.TK] = np.where(sense, p[:, L.J_O] * (w_o_new - w_o) / dt + t_load, t_k)
     x[:, L.W_M] = w_m_new
     x[:, L.W_O] = w_o_new
     # eq. (12)
