@@ -21,8 +21,8 @@ step and on a validation record when one is given.
 
 The comparison is short-horizon prediction: the model restarts from the measured state every
 horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`)
-and again after each effect added; when nothing is found, the longer horizons on which the
-model drifts are searched too (:func:`_escalate`).
+and again (never longer) after each effect added; when the base model shows nothing, the
+longer horizons on which it drifts and the shortest one are searched too (:func:`_escalate`).
 Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
 list); the rest are listed as untestable with what the record lacks. The outcome is one of
 *named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
