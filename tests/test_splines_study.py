@@ -30,6 +30,12 @@ def test_splines_base_moves_the_friction_and_keeps_its_steady_total():
         pytest.approx(b.friction.output.coulomb)
 
 
+def test_splines_base_refuses_a_joint_already_moved(monkeypatch):
+    monkeypatch.setattr(S, "preset", lambda n: preset(n).set("friction.placement", "splines"))
+    with pytest.raises(ValueError, match="starts from the mesh presets"):
+        S.splines_base("tuttle-joint1")
+
+
 def test_apply_scales_sets_kb_and_moves_only_the_inertia():
     p = S.splines_base("tuttle-joint2")
     q = S.apply(p, {"x compliance.cubic": 2.0, "x hysteresis.element_strength": 0.5,

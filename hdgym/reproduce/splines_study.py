@@ -68,7 +68,13 @@ SPLINES_TEXT = ("between flexspline and circular spline on the output side of th
 def splines_base(name: str) -> JointParams:
     """The bundled preset with the friction between the splines, its base scaled by
     ``1 - mu'`` (step 1 of the method)."""
-    p = preset(name).set("friction.placement", "splines")
+    p = preset(name)
+    if p.friction.placement != "mesh":
+        # scaling an adopted proposal again would silently make another joint
+        raise ValueError(f"splines_study: {name} has friction.placement = "
+                         f"{p.friction.placement!r}; the study starts from the mesh presets "
+                         "(once its proposal is adopted, the study is the record of how)")
+    p = p.set("friction.placement", "splines")
     f = 1.0 - p.friction.load_coefficient
     for k in FRICTION_FIELDS:
         p = p.set(f"friction.output.{k}", getattr(p.friction.output, k) * f)
