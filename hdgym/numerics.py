@@ -26,8 +26,8 @@ from hdgym.physics import layout as L
 SUBSTEPS = (1, 2, 5, 10, 20, 40)
 
 
-def _excitation(p: JointParams, n_steps: int, seed: int) -> np.ndarray:
-    """Random current at 40 % of the amplifier limit plus a mean drive, A."""
+def excitation(p: JointParams, n_steps: int, seed: int) -> np.ndarray:
+    """Random current at 40 % of the amplifier limit plus a 30 % mean drive, A."""
     t = np.arange(n_steps) * p.integration.ctrl_dt
     i_max = p.amplifier.current_limit
     cutoff = min(50.0, 0.2 / p.integration.ctrl_dt)
@@ -52,7 +52,7 @@ def convergence(p: JointParams, duration: float = 1.0, seed: int = 0,
     """Error of motor angle, output angle and flexspline torque against ``reference``
     substeps, for each count in ``substeps`` (relative to each signal's range)."""
     n = int(round(duration / p.integration.ctrl_dt))
-    u = _excitation(p, n, seed)
+    u = excitation(p, n, seed)
     ref = _angles(p, u, reference)
     span = np.ptp(ref, axis=0) + 1e-300
     rows = []
@@ -87,7 +87,7 @@ def soak(p: JointParams, n_steps: int = 1_000_000, chunk: int = 50_000, seed: in
     row = L.pack(p)
     flags = flags_of(p.effects)
     x = L.initial_state(row[None, :], flags)[0]
-    u = _excitation(p, chunk, seed)
+    u = excitation(p, chunk, seed)
     out = np.empty((chunk, L.N_STATE))
     mem0 = _rss_mb()
     t0 = time.perf_counter()

@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hdgym.commands import command_signal
 from hdgym.effects import EFFECTS, flags_of
+from hdgym.numerics import excitation
 from hdgym.params import JointParams, atomic_write_text, preset, preset_names
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
@@ -47,15 +47,6 @@ def _variants(p: JointParams) -> list[tuple[str, JointParams, bool]]:
     return out
 
 
-def _command(p: JointParams, n: int, seed: int) -> np.ndarray:
-    """Random current at 40 % of the amplifier limit plus a 30 % mean drive, A."""
-    t = np.arange(n) * p.integration.ctrl_dt
-    i_max = p.amplifier.current_limit
-    cutoff = min(50.0, 0.2 / p.integration.ctrl_dt)
-    rng = np.random.default_rng(seed)
-    return 0.3 * i_max + command_signal(f"random:{0.4 * i_max}:{cutoff}", t, rng)
-
-
 def _digest(a: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(a, dtype=np.float64).tobytes()).hexdigest()
 
@@ -68,7 +59,7 @@ def fingerprints(n_steps: int = 3000, seed: int = 0) -> dict[str, str]:
         var = _variants(base)
         dt = base.integration.ctrl_dt
         n_sub = int(base.integration.n_substeps)
-        u = _command(base, n_steps, seed)
+        u = excitation(base, n_steps, seed)
         rows = np.stack([L.pack(p) for _, p, _ in var])
         flags = np.array([flags_of(p.effects, locked_output=lk) for _, p, lk in var],
                          dtype=np.int64)
