@@ -549,10 +549,14 @@ def test_holdout_scoring_counts_honest_misses():
     from types import SimpleNamespace
 
     from hdgym.discrepancy import holdout
+    from hdgym.discrepancy.diagnosis import Diagnosis
+
+    class Stand(SimpleNamespace):  # a diagnosis's fields, with its own cut
+        nmse_cut = Diagnosis.nmse_cut
 
     def res(hidden, outcome, found, before=10.0, after=1.0, untestable=(), size=1.0):
-        d = SimpleNamespace(outcome=outcome, missing_effects=list(found), nmse_before=before,
-                            nmse_after=after, untestable=list(untestable))
+        d = Stand(outcome=outcome, missing_effects=list(found), nmse_before=before,
+                  nmse_after=after, untestable=list(untestable))
         return holdout.Result(holdout.Blind("hduc20", hidden, "step:1"), d, 1.0, size, 0.01)
 
     assert res("stiction", "named", ["stiction"]).hit

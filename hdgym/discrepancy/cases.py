@@ -43,7 +43,7 @@ from hdgym.params import (
 from hdgym.record import Record
 from hdgym.sim import Simulator
 
-from .diagnosis import Diagnosis
+from .diagnosis import HIT_CUT, Diagnosis
 from .effect import Scales
 from .experiments import PROTOCOLS, command
 from .paths import get_value, set_values
@@ -187,15 +187,10 @@ class CaseResult:
         return sorted(self.found[: len(h)]) == sorted(h) if h else not self.found
 
     @property
-    def reduction(self) -> float:
-        b, a = self.diagnosis.nmse_before, self.diagnosis.nmse_after
-        return 1.0 - a / b if b > 0 else 0.0
-
-    @property
     def passed(self) -> bool:
         if not self.case.hidden:
             return not self.found
-        return self.named_first and self.reduction >= 0.8
+        return self.named_first and self.diagnosis.nmse_cut >= HIT_CUT
 
 
 def run_case(case: Case, quick: bool = False, **kwargs) -> CaseResult:
@@ -218,7 +213,7 @@ def table(results: list[CaseResult]) -> str:
             f"| {r.case.name} | {r.case.protocol} | {', '.join(r.case.hidden) or 'none'} | "
             f"{d.outcome} | {', '.join(r.found) or 'none'} | {d.nmse_before:.3g} | "
             f"{d.nmse_after:.3g} | "
-            f"{100 * r.reduction:.0f} % | {'yes' if r.named_first else 'no'} | "
+            f"{100 * d.nmse_cut:.0f} % | {'yes' if r.named_first else 'no'} | "
             f"{'yes' if r.passed else '**no**'} | {r.seconds:.1f} |")
     return "\n".join(lines)
 

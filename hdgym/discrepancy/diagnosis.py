@@ -10,6 +10,10 @@ from hdgym.params import JointParams
 from .fitting import FitResult
 from .problem import Problem
 
+#: validation-NMSE cut (fraction) with which a generated case counts as passed / hit, when
+#: the hidden effects are named first (:mod:`.cases`, :mod:`.holdout`)
+HIT_CUT = 0.8
+
 
 @dataclass
 class Step:
@@ -76,3 +80,9 @@ class Diagnosis:
     def nmse_after(self) -> float:
         v = self.nmse_after_validation if self.nmse_after_validation else self.after.nmse
         return v["mean"]
+
+    @property
+    def nmse_cut(self) -> float:
+        """Fraction by which the added effects cut the mean NMSE (0 when there was none)."""
+        b, a = self.nmse_before, self.nmse_after
+        return 1.0 - a / b if b > 0 else 0.0

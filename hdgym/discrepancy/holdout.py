@@ -40,7 +40,7 @@ from hdgym.params import JointParams, preset, preset_names, to_dict
 from hdgym.record import Record
 from hdgym.sim import Simulator
 
-from .diagnosis import Diagnosis
+from .diagnosis import HIT_CUT, Diagnosis
 from .effect import Scales
 from .paths import get_value, set_values
 from .pool import ordered_map
@@ -232,17 +232,12 @@ class Result:
         return self.case.hidden is not None and self.size > PRESENT * self.noise
 
     @property
-    def reduction(self) -> float:
-        b, a = self.diagnosis.nmse_before, self.diagnosis.nmse_after
-        return 1.0 - a / b if b > 0 else 0.0
-
-    @property
     def hit(self) -> bool:
         d = self.diagnosis
         if not self.present:  # nothing (visible) hidden: nothing may be named
             return not d.missing_effects and d.outcome != "unexplained"
         found = d.missing_effects
-        return bool(found) and found[0] == self.case.hidden and self.reduction >= 0.8
+        return bool(found) and found[0] == self.case.hidden and self.diagnosis.nmse_cut >= HIT_CUT
 
     @property
     def honest(self) -> bool:
@@ -278,7 +273,7 @@ def table(results: list[Result]) -> str:
                                                     else ": not present"))
         found = ", ".join(d.missing_effects) or "none"
         lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
-                     f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {100 * r.reduction:.0f} % | "
+                     f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {100 * d.nmse_cut:.0f} % | "
                      f"{'yes' if r.hit else '**no**'} | {'yes' if r.honest else '**no**'} | "
                      f"{nxt} | {r.seconds:.1f} |")
     return "\n".join(lines)
