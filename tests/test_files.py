@@ -89,11 +89,20 @@ LONG_JOBS = ["hdgym/reproduce/common.py", "hdgym/numerics.py", "hdgym/bench.py",
 
 @pytest.mark.parametrize("path", LONG_JOBS)
 def test_long_jobs_show_progress(path):
-    """controllers, diagnose, reproduce, bench, numerics and sweep loop under a tqdm bar."""
+    """controllers, diagnose, reproduce, bench, numerics and sweep loop under a bar: each
+    calls hdgym.progress's ``bar`` (imported is not enough). Behaviour: the reproduce bar
+    below, the sweep's in tests/test_sweep.py."""
+    import ast
     from pathlib import Path
 
-    text = (Path(__file__).parents[1] / path).read_text()
-    assert "from hdgym.progress import" in text or "from tqdm import tqdm" in text
+    tree = ast.parse((Path(__file__).parents[1] / path).read_text())
+    names = {a.asname or a.name for node in ast.walk(tree)
+             if isinstance(node, ast.ImportFrom) and node.module == "hdgym.progress"
+             for a in node.names if a.name == "bar"}
+    assert names, f"{path} does not import hdgym.progress.bar"
+    called = {node.func.id for node in ast.walk(tree)
+              if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)}
+    assert names & called, f"{path} imports hdgym.progress.bar but never calls it"
 
 
 def test_reproduce_items_run_under_a_bar(tmp_path, capsys):

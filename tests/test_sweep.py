@@ -246,6 +246,17 @@ def test_local_sweep_writes_resumes_and_summarizes(tmp_path: Path, spec_file: Pa
     assert (out / "summary.png").stat().st_size > 10_000
 
 
+def test_sweep_shows_a_bar_and_a_closing_line(tmp_path: Path, spec_file: Path, capsys,
+                                              monkeypatch) -> None:
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+    res = run_sweep(spec_file, tmp_path / "run", workers=1, summarize=False)
+    out, err = capsys.readouterr()
+    name = "tiny"  # the spec's name
+    assert f"sweep {name}" in err and "job" in err  # the bar, on stderr
+    assert f"sweep {name}: 16 jobs, 0 already done, 16 run (0 errors)" in out
+    assert res.ran == 16
+
+
 def test_physics_fingerprint_follows_numbers_and_sources_not_notes(monkeypatch) -> None:
     from hdgym.sweep import job as J
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass, replace
 from importlib import resources
@@ -116,10 +115,11 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
         skipped = len(jobs) - len(todo)
         bar = None
         if progress:
-            from tqdm import tqdm
+            from hdgym.progress import bar as progress_bar
 
-            bar = tqdm(total=len(jobs), initial=skipped, desc=f"sweep {spec.name}", unit="job",
-                       file=sys.stderr, dynamic_ncols=True)
+            # left on screen at the end, above the closing line, as before
+            bar = progress_bar(total=len(jobs), initial=skipped, desc=f"sweep {spec.name}",
+                               unit="job", leave=True)
         try:
             for row in iter_results(todo, backend, address=address, workers=workers):
                 store.append(row)
