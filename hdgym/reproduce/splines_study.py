@@ -49,7 +49,7 @@ import numpy as np
 
 from hdgym.params import JointParams, atomic_write_text, dumps, preset
 from hdgym.reproduce import tuttle, tuttle_steps
-from hdgym.reproduce.analysis import grows_smoothly, plateau_jump, plateau_near, run_up, step_runs
+from hdgym.reproduce.analysis import plateau_jump, plateau_near, run_up, step_runs
 from hdgym.reproduce.common import echo_items, run_items, write_page
 
 JOINTS = ("tuttle-joint1", "tuttle-joint2", "tuttle-joint3")
@@ -128,26 +128,14 @@ class Verdict:
 
 
 def judge_t2(p: JointParams) -> Verdict:
-    """T2's criteria (tuttle_steps.check_joint1_steps) on joint ``p``."""
-    cur = np.array(tuttle_steps.STEP_CURRENTS)
-    n = cur.size
-    runs = step_runs([p] * n + [p.without("load_dependent_friction")] * n,
-                     np.concatenate([cur, cur]))
-    m5, m4 = np.degrees(runs.speed[:n]), np.degrees(runs.speed[n:])
-    res = plateau_jump(cur, m5, window=(2.8, 4.0), min_len=4)
-    res4 = plateau_jump(cur, m4)
-    hi = (res.jump + 2) if res.jump is not None else n
-    lo = int(np.searchsorted(cur, 2.8 - 1e-9))
-    smooth4, _ = grows_smoothly(m4[max(lo - 1, 0): hi])
-    sel = (cur > 2.8 - 1e-9) & (cur < 4.0 + 1e-9)
-    mean = float(np.mean(m5[sel]))
-    speed_ok = abs(mean / tuttle_steps.PLATEAU_SPEED_DEG - 1) <= tuttle_steps.SPEED_TOL
-    ok = res.plateau is not None and speed_ok and res.jump is not None and \
-        res4.plateau is None and smooth4
-    spread = float(m5[sel].max() / m5[sel].min() - 1)
-    return Verdict(bool(ok), spread, f"2.8-4.0 A spread {100 * spread:.1f} %, mean {mean:,.0f} "
-                   f"°/s, jump {'yes' if res.jump is not None else 'no'}, model 4 "
-                   f"{'smooth' if (res4.plateau is None and smooth4) else 'NOT smooth'}")
+    """T2's criteria (tuttle_steps.joint1_steps, as check_joint1_steps judges) on joint ``p``."""
+    st = tuttle_steps.joint1_steps(p)
+    sel = (st.cur > 2.8 - 1e-9) & (st.cur < 4.0 + 1e-9)
+    mean = float(np.mean(st.m5[sel]))
+    spread = float(st.m5[sel].max() / st.m5[sel].min() - 1)
+    return Verdict(st.passed, spread, f"2.8-4.0 A spread {100 * spread:.1f} %, mean {mean:,.0f} "
+                   f"°/s, jump {'yes' if st.res.jump is not None else 'no'}, model 4 "
+                   f"{'smooth' if st.model4_ok else 'NOT smooth'}")
 
 
 def _plateau_and_areas(p: JointParams, currents: tuple[float, ...],

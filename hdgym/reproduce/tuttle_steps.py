@@ -19,12 +19,14 @@ D.x.2 and D.1.7) beside the speed-current table and the run-up curve.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hdgym.params import JointParams, preset
 from hdgym.reproduce.analysis import (
+    PlateauResult,
     StepRuns,
     grows_smoothly,
     plateau_jump,
@@ -128,6 +130,57 @@ def _speed_figure(runs: StepRuns, cur: np.ndarray, name: str, marks: tuple[float
     return finish(item, fig, path, ok)
 
 
+@dataclass
+class Joint1Steps:
+    """T2's measurements on a joint: the current steps with all effects (model 5) and with
+    load_dependent_friction off (model 4), and the item's criteria on them."""
+
+    cur: np.ndarray  # step currents, A
+    runs: StepRuns  # models 5 then 4, one column per current each
+    m5: np.ndarray  # mean speed per current, model 5, °/s
+    m4: np.ndarray  # likewise, model 4
+    res: PlateauResult  # model 5's plateau in 2.8-4.0 A and its jump
+    res4: PlateauResult  # model 4's
+    smooth4: bool  # model 4 grows smoothly from below 2.8 A through model 5's breakout
+    rise4: float  # model 4's largest relative rise over that range
+
+    @property
+    def plateau_mean(self) -> float:
+        """Mean speed over model 5's plateau, °/s (nan without one)."""
+        if self.res.plateau is None:
+            return float("nan")
+        a, b = self.res.plateau
+        return float(np.mean(self.m5[a: b + 1]))
+
+    @property
+    def speed_ok(self) -> bool:
+        return bool(abs(self.plateau_mean / PLATEAU_SPEED_DEG - 1) <= SPEED_TOL)
+
+    @property
+    def model4_ok(self) -> bool:
+        return self.res4.plateau is None and self.smooth4
+
+    @property
+    def passed(self) -> bool:
+        return (self.res.plateau is not None and self.speed_ok and self.res.jump is not None
+                and self.model4_ok)
+
+
+def joint1_steps(p: JointParams) -> Joint1Steps:
+    """Run T2's current steps on joint ``p`` (models 5 and 4) and judge them."""
+    cur = np.array(STEP_CURRENTS)
+    n = cur.size
+    runs = step_runs([p] * n + [p.without("load_dependent_friction")] * n,
+                     np.concatenate([cur, cur]))
+    m5, m4 = np.degrees(runs.speed[:n]), np.degrees(runs.speed[n:])
+    res = plateau_jump(cur, m5, window=(2.8, 4.0), min_len=4)
+    res4 = plateau_jump(cur, m4)
+    hi = (res.jump + 2) if res.jump is not None else n
+    lo = int(np.searchsorted(cur, 2.8 - 1e-9))
+    smooth4, rise4 = grows_smoothly(m4[max(lo - 1, 0): hi])
+    return Joint1Steps(cur, runs, m5, m4, res, res4, smooth4, rise4)
+
+
 def check_joint1_steps(out: Path, quick: bool) -> Item:
     """(T2) Joint 1: velocity plateau and jump in the 2x resonance, none without tooth friction."""
     item = Item("T2", "Joint 1: velocity plateau and jump in the 2x resonance (Tuttle §2.6)",
@@ -141,27 +194,17 @@ def check_joint1_steps(out: Path, quick: bool) -> Item:
                 role="tuned on: tuttle-joint1 motor.torque_constant and compliance.damping "
                      "(see the preset's [sources]); so this item is not an independent check "
                      "of those two numbers")
-    p = preset("tuttle-joint1")
-    p4 = p.without("load_dependent_friction")
-    cur = np.array(STEP_CURRENTS)
+    st = joint1_steps(preset("tuttle-joint1"))
+    cur, runs, m5, m4, res, res4, rise4 = st.cur, st.runs, st.m5, st.m4, st.res, st.res4, st.rise4
     n = cur.size
-    runs = step_runs([p] * n + [p4] * n, np.concatenate([cur, cur]))
-    m5, m4 = np.degrees(runs.speed[:n]), np.degrees(runs.speed[n:])
-    res = plateau_jump(cur, m5, window=(2.8, 4.0), min_len=4)
-    res4 = plateau_jump(cur, m4)
-    hi = (res.jump + 2) if res.jump is not None else n
-    lo = int(np.searchsorted(cur, 2.8 - 1e-9))
-    smooth4, rise4 = grows_smoothly(m4[max(lo - 1, 0): hi])
     pl = "none"
-    mean = float("nan")
     if res.plateau is not None:
         a, b = res.plateau
-        mean = float(np.mean(m5[a: b + 1]))
         pl = f"{cur[a]:g}-{cur[b]:g} A, spread {100 * res.spread:.1f} %"
     item.check("joint 1: plateau currents", J1_PLATEAU, "2.8-4.0 A",
                "all of 2.8-4.0 A within 10 % of each other", pl, res.plateau is not None)
     item.check("joint 1: plateau speed", J1_SPEEDS, "8,000 °/s", "±15 %",
-               f"{mean:,.0f} °/s", bool(abs(mean / PLATEAU_SPEED_DEG - 1) <= SPEED_TOL))
+               f"{st.plateau_mean:,.0f} °/s", st.speed_ok)
     item.check("joint 1: jump out of the plateau", J1_JUMP, "a jump",
                "≥ +30 % between consecutive currents",
                "none" if res.jump is None else
@@ -170,8 +213,8 @@ def check_joint1_steps(out: Path, quick: bool) -> Item:
     item.check("joint 1, model 4 (no tooth friction): no plateau, no jump", MODEL4,
                "no jump", "no plateau in 2.8-4.0 A; smooth from 2.4 A through the breakout",
                f"{'no plateau' if res4.plateau is None else 'plateau'}, largest rise "
-               f"+{100 * rise4:.0f} % ({'smooth' if smooth4 else 'not smooth'})",
-               res4.plateau is None and smooth4)
+               f"+{100 * rise4:.0f} % ({'smooth' if st.smooth4 else 'not smooth'})",
+               st.model4_ok)
     item.passed = all(c.passed for c in item.checks)
     item.measured.append("currents (A): " + " | ".join(f"{c:.1f}" for c in cur))
     item.measured.append("model 5 (all effects), mean speed (°/s): "
