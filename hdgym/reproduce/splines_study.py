@@ -49,7 +49,7 @@ import numpy as np
 
 from hdgym.params import JointParams, atomic_write_text, dumps, preset
 from hdgym.reproduce import tuttle, tuttle_steps
-from hdgym.reproduce.analysis import plateau_jump, plateau_near, run_up, step_runs
+from hdgym.reproduce.analysis import plateau_jump, run_up, step_runs
 from hdgym.reproduce.common import echo_items, run_items, write_page
 
 JOINTS = ("tuttle-joint1", "tuttle-joint2", "tuttle-joint3")
@@ -143,14 +143,13 @@ def _plateau_and_areas(p: JointParams, currents: tuple[float, ...],
     cur = np.array(currents)
     runs = step_runs(p, cur)
     sp = np.degrees(runs.speed)
-    pl = plateau_near(cur, sp, 10000.0, tuttle_steps.SPEED_TOL, 0.10, 3)
+    pl = tuttle_steps.plateau_at(cur, sp, 10000.0)
     ru = run_up(runs)
     ok = pl is not None
     notes = ["no plateau near 10,000 °/s" if pl is None else
              f"plateau {cur[pl[0]]:g}-{cur[pl[1]]:g} at {np.mean(sp[pl[0]: pl[1] + 1]):,.0f} °/s"]
     for a in areas:
-        h, _ = ru.prominence(a, tuttle_steps.SPEED_TOL)
-        good = bool(np.isfinite(h) and h >= tuttle_steps.PROMINENCE)
+        h, _, good = tuttle_steps.area_at(ru, a)
         ok &= good
         notes.append(f"{a:,.0f} °/s area x{h:.2f}")
     spread = float("nan") if pl is None else float(sp[pl[0]: pl[1] + 1].max()

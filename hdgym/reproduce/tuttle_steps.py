@@ -27,6 +27,7 @@ import numpy as np
 from hdgym.params import JointParams, preset
 from hdgym.reproduce.analysis import (
     PlateauResult,
+    RunUp,
     StepRuns,
     grows_smoothly,
     plateau_jump,
@@ -79,10 +80,24 @@ def _deg(runs: StepRuns) -> np.ndarray:
     return np.degrees(runs.speed)
 
 
+def plateau_at(cur: np.ndarray, sp: np.ndarray, target: float, min_len: int = 3
+               ) -> tuple[int, int] | None:
+    """T4/T5's plateau: ``min_len`` or more consecutive currents whose speeds ``sp`` (°/s)
+    lie within 10 % of each other, their mean within :data:`SPEED_TOL` of ``target``."""
+    return plateau_near(cur, sp, target, SPEED_TOL, 0.10, min_len)
+
+
+def area_at(ru: RunUp, target: float) -> tuple[float, float, bool]:
+    """T4/T5's resonant area near ``target`` (°/s) on the run-up curve: its height over
+    the flanks, the speed it stands at, and whether it stands :data:`PROMINENCE` high."""
+    height, at = ru.prominence(target, SPEED_TOL)
+    return height, at, bool(np.isfinite(height) and height >= PROMINENCE)
+
+
 def _plateau_check(item: Item, joint: str, cur: np.ndarray, sp: np.ndarray, target: float,
                    passage: str, min_len: int = 3) -> bool:
     """A plateau of ``min_len`` or more consecutive currents within 10 % near ``target``."""
-    pl = plateau_near(cur, sp, target, SPEED_TOL, 0.10, min_len)
+    pl = plateau_at(cur, sp, target, min_len)
     model = ("none" if pl is None else f"{cur[pl[0]]:g}-{cur[pl[1]]:g} A at "
              f"{np.mean(sp[pl[0]: pl[1] + 1]):,.0f} °/s")
     return item.check(f"{joint}: plateau near {target:,.0f} °/s", passage,
@@ -90,10 +105,9 @@ def _plateau_check(item: Item, joint: str, cur: np.ndarray, sp: np.ndarray, targ
                       f"each other, mean ±{100 * SPEED_TOL:.0f} %", model, pl is not None)
 
 
-def _area_check(item: Item, joint: str, runs: StepRuns, target: float, passage: str) -> bool:
-    """A resonant area near ``target`` on the run-up curve."""
-    height, at = run_up(runs).prominence(target, SPEED_TOL)
-    ok = bool(np.isfinite(height) and height >= PROMINENCE)
+def _area_check(item: Item, joint: str, ru: RunUp, target: float, passage: str) -> bool:
+    """A resonant area near ``target`` on the run-up curve ``ru``."""
+    height, at, ok = area_at(ru, target)
     model = ("no data in the window" if not np.isfinite(height) else
              f"torque fluctuation peak x{height:.2f} at {at:,.0f} °/s")
     return item.check(f"{joint}: resonant area near {target:,.0f} °/s", passage,
@@ -101,8 +115,9 @@ def _area_check(item: Item, joint: str, runs: StepRuns, target: float, passage: 
                       f"within ±{100 * SPEED_TOL:.0f} %", model, ok)
 
 
-def _speed_figure(runs: StepRuns, cur: np.ndarray, name: str, marks: tuple[float, ...],
-                  path: Path, item: Item, ok: bool, label: str = "A") -> Item:
+def _speed_figure(runs: StepRuns, ru: RunUp, cur: np.ndarray, name: str,
+                  marks: tuple[float, ...], path: Path, item: Item, ok: bool,
+                  label: str = "A") -> Item:
     """Tuttle's axes (input velocity against time, figs D.x.2) beside the speed-current
     table and the run-up curve."""
     plt = plt_module()
@@ -120,7 +135,6 @@ def _speed_figure(runs: StepRuns, cur: np.ndarray, name: str, marks: tuple[float
     axes[1].set_xlabel(f"step current ({label})")
     axes[1].set_ylabel("mean input velocity, last 2 s (°/s)")
     axes[1].set_title("speed against current (bands: the paper's resonance speeds ±15 %)")
-    ru = run_up(runs)
     axes[2].semilogx(ru.speed, ru.level, ".-")
     for m in marks:
         axes[2].axvspan(m * (1 - SPEED_TOL), m * (1 + SPEED_TOL), color="orange", alpha=0.15)
@@ -339,13 +353,13 @@ def check_joint2_steps(out: Path, quick: bool) -> Item:
     p = preset("tuttle-joint2")
     cur = np.array(CURRENTS_2)
     runs = step_runs(p, cur)
-    sp = _deg(runs)
+    sp, ru = _deg(runs), run_up(runs)
     ok = _plateau_check(item, "joint 2", cur, sp, 10000.0, J2_TEXT + "; " + SAME_SPEED)
-    ok &= _area_check(item, "joint 2", runs, 20000.0, J2_TEXT)
+    ok &= _area_check(item, "joint 2", ru, 20000.0, J2_TEXT)
     item.passed = bool(ok)
     item.measured.append("currents (A): " + " | ".join(f"{c:g}" for c in cur))
     item.measured.append("mean speed (°/s): " + " | ".join(f"{v:.0f}" for v in sp))
-    return _speed_figure(runs, cur, "tuttle-joint2", (10000.0, 20000.0),
+    return _speed_figure(runs, ru, cur, "tuttle-joint2", (10000.0, 20000.0),
                          out / "joint2_steps.png", item, item.passed)
 
 
@@ -362,14 +376,14 @@ def check_joint3_steps(out: Path, quick: bool) -> Item:
     p = preset("tuttle-joint3")
     cur = np.array(CURRENTS_3)
     runs = step_runs(p, cur)
-    sp = _deg(runs)
-    ok = _area_check(item, "joint 3", runs, 5000.0, J3_TEXT)
+    sp, ru = _deg(runs), run_up(runs)
+    ok = _area_check(item, "joint 3", ru, 5000.0, J3_TEXT)
     ok &= _plateau_check(item, "joint 3", cur, sp, 10000.0, J3_TEXT + "; " + SAME_SPEED)
-    ok &= _area_check(item, "joint 3", runs, 20000.0, J3_TEXT)
+    ok &= _area_check(item, "joint 3", ru, 20000.0, J3_TEXT)
     ok &= item.check("joint 3: top step runs through", TOP_STEP, "> 15,000 °/s at 0.60 A",
                      "mean speed > 15,000 °/s", f"{sp[-1]:,.0f} °/s", bool(sp[-1] > 15000.0))
     item.passed = bool(ok)
     item.measured.append("currents (A): " + " | ".join(f"{c:g}" for c in cur))
     item.measured.append("mean speed (°/s): " + " | ".join(f"{v:.0f}" for v in sp))
-    return _speed_figure(runs, cur, "tuttle-joint3", (5000.0, 10000.0, 20000.0),
+    return _speed_figure(runs, ru, cur, "tuttle-joint3", (5000.0, 10000.0, 20000.0),
                          out / "joint3_steps.png", item, item.passed)
