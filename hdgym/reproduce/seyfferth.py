@@ -272,6 +272,18 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
                          + f" {_verdict(ok_lo)}")
     item.measured.append("at " + ", ".join(f"{f:g} Hz {100 * s:.1f} %" for f, s in zip(
         above, st_hi, strict=True)) + f" {_verdict(ok_hi)}")
+    # where the model's stick-slip ends (a fine scan; the paper: below 2.5 Hz)
+    fine = np.round(np.arange(2.0, 6.0 + 1e-9, 0.05), 2)
+    _, st_fine = gain_curve(p, 1.0, fine)
+    free = np.flatnonzero(st_fine == 0)
+    if free.size and free[0] > 0:
+        end = free[0]
+        later = st_fine[end:][st_fine[end:] > 0]
+        item.measured.append(
+            f"for information, the model's stick-slip ends between {fine[end - 1]:.2f} and "
+            f"{fine[end]:.2f} Hz (scan 2-6 Hz by 0.05 Hz; the paper: below 2.5 Hz)"
+            + (f"; above it, {later.size} frequencies show single stops of at most "
+               f"{100 * later.max():.1f} % of the cycle" if later.size else ""))
     sim = simulator(p, locked_output=True, sensors=False)
     turn = first_stuck_turn(p, sim, 3.0)
     if turn is not None:
