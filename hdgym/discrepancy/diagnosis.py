@@ -66,6 +66,9 @@ class Diagnosis:
     """Effect -> what the record would have to show for it to be seen."""
     next_experiments: list[str] = field(default_factory=list)
     """``hdgym experiment ...`` commands whose records would decide what this one cannot."""
+    friction_features: dict | None = None
+    """Friction features of the judged record, the base fit and the final model, and their
+    mismatch (:func:`.friction_events.summary`; None on locked or inverse records)."""
 
     @property
     def missing_effects(self) -> list[str]:

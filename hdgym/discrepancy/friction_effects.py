@@ -21,6 +21,7 @@ from .effect import (
     SPEED_BAND,
     STANDSTILL,
     TURNS,
+    Condition,
     Effect,
     FitParam,
     Scales,
@@ -34,6 +35,13 @@ Tuttle's cyclic friction), when the output turns far enough (:data:`OUTPUT_TURNS
 OUTPUT_TURNS = 0.2
 """Least output revolutions a record must span to fit a ripple per output turn (over a fifth
 of a turn its sine and cosine still differ from a constant friction level)."""
+
+
+MOVING_OR_STOPS = Condition("motion (the joint moves in at least 20 % of the record) or a "
+                            "standstill it breaks away from", lambda s: s.moving >= 0.2 or (
+                                s.standstills >= 1 and s.moving >= 0.02))
+"""Where Coulomb friction can be seen: a joint that its friction holds most of the record
+shows the friction level by standing still and breaking away (it moves in 2 % or more)."""
 
 
 def _sides(s: Scales) -> tuple[str, ...]:
@@ -237,7 +245,7 @@ def _load_neutral(d):
 FRICTION_EFFECTS: tuple[Effect, ...] = (
     Effect("coulomb_friction", "sign_steps",
            "Coulomb friction: residual steps with the sign of the velocity",
-           _coul_params, _coul_on, _coul_neutral, seen=(MOVING,),
+           _coul_params, _coul_on, _coul_neutral, seen=(MOVING_OR_STOPS,),
            channels="speed (or current) steps with the direction of motion",
            protocol="current_steps"),
     Effect("viscous_friction", "speed_bins",

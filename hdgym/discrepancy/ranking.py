@@ -17,6 +17,7 @@ from scipy.optimize import minimize_scalar
 from hdgym.params import JointParams
 from hdgym.sim import SimulationError
 
+from . import friction_events as FE
 from . import residuals as R
 from .paths import get_value, set_values
 from .problem import Problem
@@ -131,6 +132,7 @@ def rank_candidates(problem: Problem, current: JointParams,
         sens = 0.0
         size = math.nan
         newton = None
+        feat: dict = {}
         try:  # how much the effect, at the size the record suggests, changes the channels
             d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
             size = 100.0 * float(d0 @ d0) / len(problem.names)
@@ -145,6 +147,8 @@ def rank_candidates(problem: Problem, current: JointParams,
             cols = [c for *_, c in base_cols] + [on - r0] + [c for *_, c in own]
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
+            # friction: what the phase-free features say (a feature fit of its own parameters)
+            feat = FE.candidate_entry(problem, current, q, own_fps, name)
             if newton and any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
                 # order lines: the size grid of _start cannot size them (they start at zero)
                 newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
@@ -154,7 +158,7 @@ def rank_candidates(problem: Problem, current: JointParams,
                     "signature_explained": round(sig["explained"], 4),
                     "sensitivity_explained": round(sens, 4),
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
-                    "size_nmse": size, "_newton": newton})
+                    "size_nmse": size, "_newton": newton, **feat})
     out.sort(key=lambda c: -c["score"])
     return out
 

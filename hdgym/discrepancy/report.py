@@ -17,6 +17,7 @@ import numpy as np
 
 from hdgym.files import umask_mode
 
+from . import friction_events as FE
 from . import residuals as R
 from .diagnosis import Diagnosis
 
@@ -47,7 +48,8 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
             "evidence": {**s.evidence, "candidates": [
                 {k: c.get(k) for k in ("name", "score", "signature_explained",
                                        "sensitivity_explained", "relative_improvement",
-                                       "trial_nmse")} for c in s.candidates]},
+                                       "trial_nmse", "feature_explained",
+                                       "feature_judgement")} for c in s.candidates]},
             "fitted_parameters": {k: _r(v, 6) for k, v in s.values.items()},
             "nmse_after": _r(s.nmse_validation["mean"] if s.nmse_validation else s.nmse["mean"]),
             "nmse_after_training": _nm(s.nmse),
@@ -89,6 +91,7 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
         "horizon_s": diag.horizon,
         "noise_nmse": _nm(diag.noise),
         "next_experiments": list(diag.next_experiments),
+        "friction_features": diag.friction_features,
         "conclusion": diag.conclusion,
         "notes": list(notes or []),
         "seconds": _r(diag.seconds, 3),
@@ -273,6 +276,7 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
             pars = ", ".join(f"`{p}` = {v:.4g}" for p, v in s["fitted_parameters"].items())
             lines.append(f"| {k} | {s['name']} | {evid} | {s['nmse_after']} | {pars} |")
         lines.append("")
+    lines += FE.markdown(js.get("friction_features"))
     lines += ["## Where the base model disagrees", ""] + _fmt_where(js["where"]) + [""]
     lines += ["## After", ""] + _fmt_where(js["where_after"]) + [""]
     if js["remaining_candidates"]:

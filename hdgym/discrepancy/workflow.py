@@ -41,6 +41,7 @@ from hdgym.params import JointParams
 from hdgym.progress import bar
 from hdgym.record import Record
 
+from . import friction_events as FE
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
@@ -93,6 +94,9 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     q3 = cand.get("_newton")  # order lines: also from a Gauss-Newton step (_newton_start)
     if q3 is not None:
         starts.append(q3)
+    qf = cand.get("_feature_trial")  # drifting: friction sized on its phase-free features
+    if qf is not None:
+        starts.append(qf)
     fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
             for s in starts]
     res = min(fits, key=lambda f: f.cost)
@@ -149,6 +153,8 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     """
     params = given
     candidates = rank_candidates(problem, current.params, params, newton)
+    if mean_gain:  # a drifting comparison: friction is also ranked by its features
+        FE.rank_by_features(candidates)
     if not candidates:
         return None, "every testable effect is already in the model", candidates
     trials = []
@@ -205,9 +211,14 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                 continue
             cut = 1.0 - v_new["mean"] / v_now["mean"] if v_now["mean"] > 0 else 0.0
             if mean_gain and not cut >= mean_gain:
-                reasons.append(f"{best['name']} cuts the mean validation NMSE by "
-                               f"{100 * cut:.0f} % (needs {100 * mean_gain:.0f} % here)")
-                continue
+                # a drifting comparison: a friction effect may show on its phase-free
+                # features instead (friction_events.judge)
+                why = FE.accepts(vprob, current.params, polished.params, best)
+                if why:
+                    reasons.append(f"{best['name']} cuts the mean validation NMSE by "
+                                   f"{100 * cut:.0f} % (needs {100 * mean_gain:.0f} % here) "
+                                   f"{why}")
+                    continue
         accepted = (best, polished, rel)
         break
     if accepted is None:
@@ -233,7 +244,10 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
       choice fall on a long one, on which even the right model drifts (a resonant record):
       the shortest horizon is searched too.
 
-    Order-line candidates there also start from a Gauss-Newton step (:func:`_newton_start`).
+    Order-line candidates there also start from a Gauss-Newton step (:func:`_newton_start`);
+    friction candidates are also ranked by their phase-free features, start from their
+    feature fit, and may pass on their features instead of the NMSE cut
+    (:func:`.friction_events.rank_by_features`, :func:`.friction_events.accepts`).
     An effect found at another horizon must cut the validation NMSE by
     :data:`ESCALATED_GAIN` (a small gain on a drifting comparison is what any extra
     parameter buys), and the diagnosis then stays at
@@ -448,6 +462,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
+        friction_features=FE.summary(judged, before.params, current.params),
         horizon=None if problem.inverse else problem.segment,
         noise=judged.noise, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
