@@ -89,6 +89,7 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
         "horizon_s": diag.horizon,
         "noise_nmse": _nm(diag.noise),
         "next_experiments": list(diag.next_experiments),
+        "unexplained_channels": dict(diag.unexplained_channels),
         "conclusion": diag.conclusion,
         "notes": list(notes or []),
         "seconds": _r(diag.seconds, 3),

@@ -44,7 +44,8 @@ from hdgym.record import Record
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .outcome import NOISE_FACTOR, outcome_of
+from .floor import unexplained_channels
+from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
@@ -395,7 +396,14 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
     judged = vprob or problem
-    final = judged.nmse(current.params)["mean"]
+    final_channels = judged.nmse(current.params)
+    final = final_channels["mean"]
+    stuck: dict[str, str] = {}
+    if at_noise_level(final, judged.noise["mean"]):
+        # the mean can hide one channel that alone shows what the model lacks
+        stuck = unexplained_channels(judged, current.params,
+                                     model_params(current.params, judged.scales, params),
+                                     final_channels, NOISE_FACTOR)
     for c in candidates:  # effects the record's noise would hide at the size it suggests
         if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
             untestable_why[c["name"]] = (
@@ -404,7 +412,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, params)
+                                untestable_why, params, stuck)
+    if stuck:
+        conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
@@ -415,6 +425,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
+        unexplained_channels=stuck,
         horizon=None if problem.inverse else problem.segment,
         noise=judged.noise, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
