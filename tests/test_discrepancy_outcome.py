@@ -38,3 +38,35 @@ def test_a_clipped_current_is_not_noise_or_slack():
     assert outcome_of([], 0.5 * RESOLVED, 1.0, [], {}, base, {})[0] == "nothing missing"
     assert outcome_of(["x"], 0.5 * RESOLVED, 1.0, [], {}, base, why)[0] == (
         "named; rest unexplained")
+
+
+def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
+    from hdgym.discrepancy.fitting import fit
+    from hdgym.discrepancy.workflow import THRESHOLD, _spring
+    from hdgym.params import preset
+    from hdgym.record import Record
+    from hdgym.sim import Simulator
+
+    truth = preset("seyfferth-rh32")  # the blind case's drive and command, 2 s
+    run = Simulator(truth, locked_output=True).run("sine:2.0:1", 2.0, seed=1)
+    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
+    given = REGISTRY["nonlinear_stiffness"].neutral(truth.without("nonlinear_stiffness"))
+    prob = Problem(rec, given, segment=0.5)
+    fps = model_params(given, prob.scales, given)
+    base = fit(prob, given, fps, max_nfev=20)
+    # on the time channels the refitted linear spring is within the noise
+    assert prob.nmse(base.params)["mean"] < 3.0 * prob.noise["mean"]
+    assert REGISTRY["nonlinear_stiffness"].compare == ("time", "spring")
+    prob.set_compare("spring")
+    assert prob.names == ("motor_angle",) and prob.segment == 0.0
+    # the bend stays on the curve, well above the noise of its bin means; the joint the
+    # record was made with leaves it at that noise
+    assert prob.nmse(base.params)["motor_angle"] > 3.0 * prob.noise["motor_angle"]
+    assert prob.nmse(truth)["motor_angle"] < prob.noise["motor_angle"]
+    prob.set_compare("time")
+    assert prob.noise is prob.noise_time and prob.segment == 0.5 and len(prob.names) == 3
+    # the workflow's spring search names it there
+    accepted, _, _, stuck = _spring(prob, None, base, given, [f.path for f in fps], THRESHOLD,
+                                    10, 20)
+    assert accepted is not None and accepted[0]["name"] == "nonlinear_stiffness"
+    assert prob.compare == "spring" and not stuck

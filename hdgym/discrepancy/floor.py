@@ -31,6 +31,7 @@ from hdgym.sim import SimulationError, Simulator
 from .effect import FitParam
 from .paths import get_value, set_values
 from .problem import Problem, with_sample_time
+from .spring import project
 
 FLOOR_SEED = 9173
 """Seed of the sensor noise of the record the model makes for :func:`floor_nmse`."""
@@ -57,6 +58,7 @@ def floor_nmse(problem: Problem, p: JointParams, seed: int = FLOOR_SEED) -> dict
         own = Problem(Record(dict(rec.columns), dict(rec.meta), "comparison floor"), p,
                       mode=problem.mode, cutoff=problem.cutoff, channels=problem.names,
                       segment=problem.segment)
+        own.set_compare(problem.compare)
     except (SimulationError, ValueError):
         return {}
     out = own.nmse(p)
@@ -93,6 +95,8 @@ def reach_nmse(problem: Problem, p: JointParams, fps: list[FitParam]) -> dict[st
             continue
         for k in problem.names:
             d = problem._m(pred[k] - ref[k])
+            if problem.compare == "spring":
+                d = project(d, problem.spring_bins)
             roots[k] += math.sqrt(100.0 * float(np.mean(d**2)) / problem.sigma2[k])
     return {k: r**2 for k, r in roots.items()}
 
@@ -115,3 +119,32 @@ def unexplained_channels(problem: Problem, p: JointParams, fps: list[FitParam],
                 f"shows on a record it made itself, and beyond the {reach[k]:.2g} % its fitted "
                 f"parameters can change it")
             for k in above if k in reach and final[k] > reach[k]}
+
+
+def curve_unexplained(judged: Problem, p: JointParams, candidates: list[dict], min_score: float,
+                      factor: float) -> dict[str, str]:
+    """The spring curve left unexplained (``{"spring:<channel>": why}``) when nothing on it
+    was named.
+
+    Only when an effect the curve reveals is missing and explains at least ``min_score``
+    of it in a linearized refit (``candidates``, best first): a curve above ``factor`` x its
+    noise level (the larger of its bin means' noise and :func:`floor_nmse`) is then not
+    "nothing missing". With every such effect in the model what is left is the slack of its
+    own parameters. ``judged`` compares on the curve (:meth:`.problem.Problem.set_compare`).
+    """
+    if not candidates or candidates[0]["score"] < min_score:
+        return {}
+    final = judged.nmse(p)
+    floor = floor_nmse(judged, p)
+    out = {}
+    for k in judged.names:
+        level = max(floor.get(k, 0.0), judged.noise[k])
+        if final[k] > factor * level:
+            out[f"spring:{k}"] = (
+                f"the spring curve ({k} over bins of the measured torque and its direction): "
+                f"NMSE {final[k]:.3g} %, above {factor:g} x its noise level {level:.2g} % (the "
+                f"larger of the noise of its bin means and what the model refitted on it shows "
+                f"on a record it made itself); {candidates[0]['name']} explains "
+                f"{100 * candidates[0]['score']:.0f} % of it in a linearized refit but is not "
+                f"worth adding")
+    return out

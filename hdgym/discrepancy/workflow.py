@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import replace
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from hdgym.record import Record
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .floor import unexplained_channels
+from .floor import curve_unexplained, unexplained_channels
 from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
@@ -177,10 +178,13 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
         gain = current.nmse["mean"] - res.nmse["mean"]
-        if rel < threshold or gain < MIN_GAIN:
+        # on the spring curve the noise of a bin mean, not a fixed share, is the least gain
+        min_gain = (MIN_GAIN if problem.compare == "time"
+                    else NOISE_FACTOR * problem.noise["mean"])
+        if rel < threshold or gain < min_gain:
             reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
                            f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
-                           f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+                           f"{gain:.3g} points (threshold {min_gain:.3g})")
             continue
         polished = fit(problem, res.params,
                        model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
@@ -266,6 +270,40 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
     return None
 
 
+def _spring(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
+            base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
+            ) -> tuple[tuple | None, list[dict], FitResult, dict[str, str]]:
+    """Search the spring curve of a locked-output record (:mod:`.spring`): the base fit's
+    linear stiffness absorbs a hardening spring to below the time channels' noise; over bins
+    of the measured torque (and its direction) the noise goes and the bend stays. The base
+    model is refitted on the curve, then the effects it reveals are ranked and tried; one
+    must cut the curve's mean validation NMSE by :data:`ESCALATED_GAIN` and lower it by
+    :data:`.outcome.NOISE_FACTOR` x its noise; the diagnosis then stays on the curve.
+    Returns ``(accepted, candidates, base refit on the curve, unexplained)`` (``accepted``
+    as :func:`_search`'s; None: back on the time channels, ``unexplained`` from
+    :func:`.floor.curve_unexplained`).
+    """
+    probs = [problem] + ([vprob] if vprob is not None else [])
+    for pr in probs:
+        pr.set_compare("spring")
+    nm = problem.nmse(current.params)
+    cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+    refit = fit(problem, cur.params, model_params(cur.params, problem.scales, given),
+                max_nfev=nfev_trial)
+    if refit.cost < cur.cost:
+        cur = FitResult(refit.params, {**cur.values, **refit.values}, refit.nmse, refit.nfev,
+                        refit.cost)
+    accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
+                                      nfev_trial, nfev_polish, ESCALATED_GAIN)
+    if accepted is not None:
+        return accepted, candidates, cur, {}
+    stuck = curve_unexplained(vprob or problem, cur.params, candidates, MIN_SCORE,
+                              NOISE_FACTOR)
+    for pr in probs:
+        pr.set_compare("time")
+    return None, candidates, cur, stuck
+
+
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
              mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
              quick: bool = False, cutoff: float | None = None,
@@ -322,6 +360,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     chosen = problem.segment
     prog.update(1)
     steps: list[Step] = []
+    spring_stuck: dict[str, str] = {}
     conclusion = ""
     candidates: list[dict] = []
     for _ in range(max_steps):
@@ -346,6 +385,17 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                               nfev_trial, nfev_polish)
             if found is not None:
                 accepted, candidates, current = found
+                escalated = True
+        if (accepted is None and auto and not problem.inverse and not steps
+                and problem.locked and problem.compare == "time"):  # then the spring curve
+            found_s, cands_s, on_curve, spring_stuck = _spring(
+                problem, vprob, current, params, base_paths, threshold, nfev_trial,
+                nfev_polish)
+            spring = replace(problem.scales, spring=True)  # (what it compared is tested)
+            untestable_why = {n: w for n, w in untestable_why.items()
+                              if not REGISTRY[n].testable(spring)}
+            if found_s is not None:
+                accepted, candidates, current, before = found_s, cands_s, on_curve, on_curve
                 escalated = True
         if accepted is None:
             conclusion = reason
@@ -389,7 +439,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
     prog.close()
-    if before.nmse is not None and problem.segment != chosen:  # escalated: report on it
+    if (before.nmse is not None and problem.segment != chosen
+            and problem.compare == "time"):  # escalated: report on it
         nm = problem.nmse(before.params)
         before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     where_before = _where(problem, before.params)
@@ -398,10 +449,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     judged = vprob or problem
     final_channels = judged.nmse(current.params)
     final = final_channels["mean"]
-    stuck: dict[str, str] = {}
+    stuck: dict[str, str] = dict(spring_stuck)
     if at_noise_level(final, judged.noise["mean"]):
         # the mean can hide one channel that alone shows what the model lacks
-        stuck = unexplained_channels(judged, current.params,
+        stuck |= unexplained_channels(judged, current.params,
                                      model_params(current.params, judged.scales, params),
                                      final_channels, NOISE_FACTOR)
     for c in candidates:  # effects the record's noise would hide at the size it suggests
@@ -425,7 +476,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
-        unexplained_channels=stuck,
+        unexplained_channels=stuck, compare=problem.compare,
         horizon=None if problem.inverse else problem.segment,
         noise=judged.noise, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
