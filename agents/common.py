@@ -13,7 +13,11 @@ A config is a TOML file (see ``agents/configs/``) with the tables
   ``n_envs``, ``vec_env`` (``native``: one batch of the compiled env,
   the default; ``dummy`` or ``subproc``: a Python env per joint), ``seed``,
   ``eval_freq``, ``eval_episodes``, ``checkpoint_freq`` (env steps);
-* ``[policy]``: ``net_arch`` (hidden layer sizes), ``log_std_init``;
+* ``[policy]``: ``net_arch`` (hidden layer sizes), ``log_std_init``,
+  ``history`` (the policy sees its last ``history`` observations stacked, each
+  with the action before it; default 1) and ``normalize_obs`` (the policy
+  sees the observation standardized by its running mean and variance over
+  training, SB3's ``VecNormalize``; default false), see :class:`ObsPipeline`;
 * ``[algo]``: keyword arguments of the SB3 algorithm.
 
 The resolved config is stored inside the saved policy zip
@@ -38,6 +42,8 @@ import numpy as np
 import hdgym  # noqa: F401  (registers the env ids)
 
 CONFIG_MEMBER = "agents_config.json"
+#: the observation pipeline's numbers (history, normalization statistics) in a policy zip
+PIPELINE_MEMBER = "agents_obs_pipeline.json"
 DEFAULT_CONFIGS = {"ppo": "resonance_ppo", "sac": "resonance_sac"}
 
 
@@ -219,7 +225,9 @@ def policy_config(zip_path: str | Path) -> dict[str, Any] | None:
 
 
 def load_policy(path: str | Path) -> Any:
-    """Load a saved SB3 model (PPO or SAC, from the stored config) on the CPU."""
+    """Load a saved SB3 model (PPO or SAC, from the stored config) on the CPU; a policy
+    trained with a history or normalized observations comes as an :class:`ObsPipeline`
+    that feeds it the env's observations the way it saw them in training."""
     from stable_baselines3 import PPO, SAC
 
     cfg = policy_config(path) or {}
@@ -227,7 +235,94 @@ def load_policy(path: str | Path) -> Any:
     cls = {"ppo": PPO, "sac": SAC}.get(algo)
     if cls is None:
         raise ValueError(f"{path}: unknown algo {algo!r} in the stored config")
-    return cls.load(str(path), device="cpu")
+    model = cls.load(str(path), device="cpu")
+    with zipfile.ZipFile(path) as zf:
+        if PIPELINE_MEMBER not in zf.namelist():
+            return model
+        spec = json.loads(zf.read(PIPELINE_MEMBER))
+    return ObsPipeline(model, int(spec["history"]), spec.get("obs_mean"), spec.get("obs_var"),
+                       float(spec.get("clip", 10.0)), float(spec.get("epsilon", 1e-8)))
+
+
+def obs_options(cfg: Mapping[str, Any]) -> tuple[int, bool]:
+    """A config's ``[policy]`` ``history`` (>= 1) and ``normalize_obs``."""
+    pol = cfg.get("policy", {})
+    history = pol.get("history", 1)
+    if not (isinstance(history, int) and not isinstance(history, bool) and history >= 1):
+        raise ValueError(f"policy.history must be a whole number >= 1, got {history!r}")
+    norm = pol.get("normalize_obs", False)
+    if not isinstance(norm, bool):
+        raise ValueError(f"policy.normalize_obs must be true or false, got {norm!r}")
+    return history, norm
+
+
+def wrap_obs(venv: Any, cfg: Mapping[str, Any], training: bool = True) -> Any:
+    """``venv`` with the config's observation pipeline: SB3's ``VecFrameStack`` for a
+    history, then ``VecNormalize`` (observations only, the reward as the env's)."""
+    from stable_baselines3.common.vec_env import VecFrameStack, VecNormalize
+
+    history, norm = obs_options(cfg)
+    if history > 1:
+        venv = VecFrameStack(venv, history)
+    if norm:
+        venv = VecNormalize(venv, training=training, norm_obs=True, norm_reward=False)
+    return venv
+
+
+def save_pipeline(zip_path: str | Path, venv: Any, cfg: Mapping[str, Any]) -> None:
+    """Store the observation pipeline (history, normalization statistics of the training
+    ``venv``) in a saved policy zip; nothing for a config without one."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    history, norm = obs_options(cfg)
+    if history == 1 and not norm:
+        return
+    spec: dict[str, Any] = {"history": history}
+    if norm:
+        v = venv
+        while not isinstance(v, VecNormalize):
+            v = v.venv
+        spec.update(obs_mean=v.obs_rms.mean.tolist(), obs_var=v.obs_rms.var.tolist(),
+                    clip=float(v.clip_obs), epsilon=float(v.epsilon))
+    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
+        if PIPELINE_MEMBER not in zf.namelist():
+            zf.writestr(PIPELINE_MEMBER, json.dumps(spec))
+
+
+class ObsPipeline:
+    """A policy fed the way it was trained: the last ``history`` observations stacked
+    (oldest first, zeros before an episode's first, as SB3's ``VecFrameStack``), then
+    standardized (``(x - mean) / sqrt(var + epsilon)``, clipped to ``clip``, as
+    ``VecNormalize``). ``predict`` takes the env's observations like an SB3 model's;
+    ``episode_start`` (one flag per env) clears an env's history."""
+
+    def __init__(self, model: Any, history: int, mean: Any = None, var: Any = None,
+                 clip: float = 10.0, epsilon: float = 1e-8) -> None:
+        self.model = model
+        self.history = int(history)
+        self.mean = None if mean is None else np.asarray(mean, dtype=np.float64)
+        self.std = None if var is None else np.sqrt(np.asarray(var, dtype=np.float64) + epsilon)
+        self.clip = clip
+        self.stack: np.ndarray | None = None
+
+    def predict(self, obs: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        x = np.asarray(obs, dtype=np.float32)
+        single = x.ndim == 1
+        x = np.atleast_2d(x)
+        n, d = x.shape
+        if self.stack is None or self.stack.shape[0] != n:
+            self.stack = np.zeros((n, d * self.history), dtype=np.float32)
+            episode_start = np.ones(n, dtype=bool)
+        if episode_start is not None:
+            self.stack[np.asarray(episode_start, dtype=bool).reshape(n)] = 0.0
+        self.stack = np.roll(self.stack, -d, axis=1)
+        self.stack[:, -d:] = x
+        z = self.stack.astype(np.float64)
+        if self.mean is not None:
+            z = np.clip((z - self.mean) / self.std, -self.clip, self.clip)
+        a, s = self.model.predict(z.astype(np.float32), state, deterministic=deterministic)
+        return (a[0] if single else a), s
 
 
 def deg(x: float | np.ndarray) -> float | np.ndarray:

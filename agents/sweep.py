@@ -9,7 +9,9 @@ without it.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from agents.common import config_path, load_config, load_policy
@@ -42,7 +44,29 @@ def _check_agent(config: Mapping[str, Any]) -> None:
         raise OptionError(str(exc), "config") from None
 
 
-@register("rl_train", needs="agent", options={}, check_slot=_check_agent)
+#: what a trained policy's metrics depend on besides the drive: the env's task
+#: (targets, deadline, rating, reward: hdgym/envs) and the training and evaluation code
+_TASK_SOURCES = (Path(__file__).resolve().parent,
+                 Path(__file__).resolve().parent.parent / "hdgym" / "envs")
+
+
+def task_digest(agent: Mapping[str, Any] | None) -> str:
+    """16 hex digits over the agent config file's text, the env package's and the
+    agents package's sources: a resumed sweep reruns its ``rl_train`` jobs when
+    the task (e.g. ``DEADLINE`` or ``GEAR_RATINGS``), the training code or the
+    config changes."""
+    h = hashlib.sha256()
+    if agent and isinstance(agent.get("config"), str):
+        h.update(config_path(agent["config"]).read_bytes() + b"\0")
+    for root in _TASK_SOURCES:
+        for f in sorted(root.rglob("*.py")):
+            h.update(f.relative_to(root.parent).as_posix().encode() + b"\0")
+            h.update(f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+@register("rl_train", needs="agent", options={}, check_slot=_check_agent,
+          task_digest=task_digest)
 def rl_train(params: JointParams, job: Any) -> dict[str, float]:
     """Train an SB3 policy on the job's drive and evaluate it: ``success`` (the task's:
     the target by the deadline within the rating), ``reached``, ``trapped``,

@@ -20,7 +20,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.common import DEFAULT_CONFIGS, embed_config, load_config, make_vec_env
+from agents.common import (
+    DEFAULT_CONFIGS,
+    embed_config,
+    load_config,
+    make_vec_env,
+    save_pipeline,
+    wrap_obs,
+)
 
 
 def shown(path: str | Path) -> str:
@@ -61,7 +68,7 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     n_envs, seed = int(t["n_envs"]), int(t["seed"])
     out.mkdir(parents=True, exist_ok=True)
     (out / "monitor").mkdir(exist_ok=True)
-    venv = make_vec_env(cfg, n_envs, seed, out / "monitor", t["vec_env"])
+    venv = wrap_obs(make_vec_env(cfg, n_envs, seed, out / "monitor", t["vec_env"]), cfg)
     model = build_model(cfg, venv, seed, str(out / "tb"))
     callbacks = []
     if int(t["checkpoint_freq"]) > 0:
@@ -70,7 +77,8 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     eval_env = None
     if int(t["eval_freq"]) > 0:
         n_eval = int(t["eval_episodes"])
-        eval_env = make_vec_env(cfg, n_eval, seed + 10_000, None, t["vec_env"])
+        eval_env = wrap_obs(make_vec_env(cfg, n_eval, seed + 10_000, None, t["vec_env"]), cfg,
+                            training=False)
         callbacks.append(EvalCallback(eval_env, n_eval_episodes=n_eval,
                                       eval_freq=max(int(t["eval_freq"]) // n_envs, 1),
                                       log_path=str(out / "eval"),
@@ -83,8 +91,10 @@ def train(cfg: dict[str, Any], out: Path, progress: bool = True) -> dict[str, An
     final = out / "final.zip"
     model.save(str(final))
     embed_config(final, cfg)
+    save_pipeline(final, venv, cfg)
     if (out / "best" / "best_model.zip").exists():
         embed_config(out / "best" / "best_model.zip", cfg)
+        save_pipeline(out / "best" / "best_model.zip", venv, cfg)
     venv.close()
     if eval_env is not None:
         eval_env.close()

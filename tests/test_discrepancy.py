@@ -221,6 +221,52 @@ def test_pattern_search_follows_a_staircase_cost():
     assert np.allclose(z, target, atol=0.01) and n <= 200
 
 
+class _ParamStairs:
+    """A stand-in problem whose residual moves in steps of a third of a per cent of each
+    parameter (like a cost over encoder counts and whole substeps): between the fine
+    difference step of least squares and the coarse one."""
+
+    names = ("x",)
+    stick_slip = False
+    paths = ("motor.inertia", "compliance.stiffness")
+
+    def __init__(self, truth):
+        self.truth = truth
+        self.measured = {"x": np.zeros(400)}
+        self.t = np.linspace(0.0, 1.0, 400)
+
+    def vector(self, p, decimate=1):
+        out = []
+        for path in self.paths:
+            rel = math.floor((get_value(p, path) / get_value(self.truth, path) - 1) * 300) / 300
+            out.append(np.sin(7 * self.t * (1 + rel)) + rel * np.cos(3 * self.t)
+                       - np.sin(7 * self.t))
+        return np.concatenate(out) / 20
+
+    def nmse(self, p):
+        v = 100.0 * float(np.sum(self.vector(p) ** 2))
+        return {"x": v, "mean": v}
+
+
+def test_base_fit_with_a_coarse_step_crosses_a_staircase_cost():
+    from hdgym.discrepancy.effect import FitParam
+    from hdgym.discrepancy.fitting import fit
+    from hdgym.params import preset
+
+    truth = preset("tuttle-joint3")
+    p = set_values(truth, {"motor.inertia": 1.04 * truth.motor.inertia,
+                           "compliance.stiffness": 0.96 * truth.compliance.stiffness})
+    fps = [FitParam(path, 0.5 * get_value(truth, path), 2.0 * get_value(truth, path))
+           for path in _ParamStairs.paths]
+    prob = _ParamStairs(truth)
+    fine = fit(prob, p, fps, max_nfev=20)
+    both = fit(prob, p, fps, max_nfev=20, coarse=True)
+    assert fine.nmse["mean"] > 0.5  # the fine difference step sees flat stairs and stops
+    assert both.nmse["mean"] < 0.01 * fine.nmse["mean"]
+    for path in _ParamStairs.paths:
+        assert both.values[path] == pytest.approx(get_value(truth, path), rel=0.005)
+
+
 def test_ke_lines_follow_the_simulator_split():
     from hdgym.discrepancy.gear_effects import ke_lines
     from hdgym.params import preset

@@ -96,3 +96,24 @@ def test_rh25_ablation_hysteresis_damps_most(tmp_path):
 def test_rh32_viscous_share_is_small(tmp_path):
     item = S.check_viscous_share(tmp_path, quick=True)
     assert item.passed, item.measured
+
+
+def test_zero_torque_deviation_of_an_ellipse():
+    """An elliptic loop x = a sin(ph), T = k (x - d cos(ph)): the torque is zero where
+    a sin(ph) = d cos(ph), i.e. at x = +-a d / hypot(a, d)."""
+    ph = np.linspace(0.0, 2 * np.pi, 2001)
+    x = np.radians(0.5) * np.sin(ph)
+    d = np.radians(0.12)
+    torque = 4870.0 * (x - d * np.cos(ph))
+    dev = S.zero_torque_deviation(x, torque)
+    assert dev == pytest.approx(np.radians(0.5 * 0.12 / np.hypot(0.5, 0.12)), rel=1e-4)
+    assert np.isnan(S.zero_torque_deviation(x, np.abs(torque) + 1.0))
+
+
+@pytest.mark.xfail(strict=True, reason="held-out check fails: with the hysteresis tuned on "
+                   "fig. 18 (item h), the RH-25's locked loop sits 0.36-0.40 deg off the spring "
+                   "at zero torque for peak loads of 146-163 N m, against the paper's 'up to "
+                   "0.3 deg' (Seyfferth §2.2)")
+def test_rh25_quasistatic_deviation_up_to_0_3_deg(tmp_path):
+    item = S.check_quasistatic_loop(tmp_path, quick=True)
+    assert item.passed, item.measured

@@ -82,6 +82,17 @@ def _newton_start(problem: Problem, q: JointParams, on: np.ndarray,
         return None
 
 
+def _side_groups(fps) -> list[list]:
+    """``fps`` grouped by friction side (``friction.input.*``, ``friction.output.*``);
+    parameters of no side are left out."""
+    groups: dict[str, list] = {}
+    for fp in fps:
+        parts = fp.path.split(".")
+        if len(parts) > 2 and parts[0] == "friction" and parts[1] in ("input", "output"):
+            groups.setdefault(parts[1], []).append(fp)
+    return list(groups.values())
+
+
 def _set(p: JointParams, path: str, value: float) -> JointParams:
     return set_values(p, {path: value})
 
@@ -167,7 +178,7 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
              or "element_stiffness[" in fp.path]
     size = [fp for fp in fps if fp not in shape and fp.lower == 0.0]
     rest = [fp for fp in fps if fp not in shape and fp not in size]
-    trials: list[dict[str, float]] = []
+    trials: list[tuple[dict[str, float], tuple]] = []  # (values, the size params scaled)
     # size of the grid: a share of each size parameter's upper bound, or, when the record
     # gave the sizes (eff.sized), a factor on them
     sized = eff.sized(problem.scales)
@@ -181,11 +192,13 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
                        if fp.path.endswith("stribeck_velocity")} for g in (0.02, 0.1, 0.4)]
         for f in grid:
             for sh in shapes:
-                trials.append({**{fp.path: f * unit[fp.path] for fp in size}, **sh})
+                trials.append(({**{fp.path: f * unit[fp.path] for fp in size}, **sh},
+                               tuple(size)))
     for f in (0.3, 3.0):
         vals = {fp.path: min(max(get_value(q, fp.path) * f, fp.lower), fp.upper) for fp in rest}
         if vals:
-            trials.append(vals)
+            trials.append((vals, ()))
+
     def cost(vals: dict[str, float]) -> float:
         try:
             return problem.nmse(set_values(q, vals))["mean"]
@@ -193,23 +206,40 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
             return math.inf
 
     best_vals: dict[str, float] = {}
+    best_size: tuple = ()
     best_cost = problem.nmse(q)["mean"]
-    for vals in trials:
+    for vals, scaled in trials:
         c = cost(vals)
         if c < best_cost:
-            best_vals, best_cost = vals, c
-    first = size[0].path if size else ""
-    if size and best_vals and unit[first] > 0:
-        # the valley of a static friction level is narrow: refine the common fraction
-        f0 = best_vals[first] / unit[first]
+            best_vals, best_size, best_cost = vals, scaled, c
+    sides = _side_groups(size)
+    if len(sides) > 1:
+        # one friction side alone (the other's size at zero), at the best shape found: the
+        # sides are not interchangeable (motor-side friction acts before the spring,
+        # output-side friction loads it), and the grid above moves them together, so its
+        # best start can lie far from either (wave-drive-50's motor-side viscous friction)
         sh = {k: v for k, v in best_vals.items() if k not in {fp.path for fp in size}}
+        for group in sides:
+            for f in grid:
+                vals = {**{fp.path: (f * unit[fp.path] if fp in group else fp.lower)
+                           for fp in size}, **sh}
+                c = cost(vals)
+                if c < best_cost:
+                    best_vals, best_size, best_cost = vals, tuple(group), c
+    if best_size and best_vals and unit[best_size[0].path] > 0:
+        # the valley of a static friction level is narrow: refine the common fraction
+        first = best_size[0].path
+        f0 = best_vals[first] / unit[first]
+        fixed = {k: v for k, v in best_vals.items() if k not in {fp.path for fp in best_size}}
 
         def along(logf: float) -> float:
-            return cost({**{fp.path: math.exp(logf) * unit[fp.path] for fp in size}, **sh})
+            return cost({**{fp.path: math.exp(logf) * unit[fp.path] for fp in best_size},
+                         **fixed})
 
         step = math.log(hi_f / lo_f) / (len(grid) - 1)
         opt = minimize_scalar(along, bounds=(math.log(f0) - step, math.log(f0) + step),
                               method="bounded", options={"maxiter": 12, "xatol": 0.01})
         if opt.fun < best_cost:
-            best_vals = {**{fp.path: math.exp(opt.x) * unit[fp.path] for fp in size}, **sh}
+            best_vals = {**{fp.path: math.exp(opt.x) * unit[fp.path] for fp in best_size},
+                         **fixed}
     return set_values(q, best_vals) if best_vals else q

@@ -4,8 +4,9 @@ a job's randomized drive is drawn from its preset, grid point and spreads
 
 A job's id also hashes the physics it runs on (:func:`physics_fingerprint`:
 the simulator's physics and sensor sources and the resolved parameters of
-its preset), so a row computed before a physics or preset change is not
-taken as done by a resumed sweep."""
+its preset), and for scenarios that declare one, a digest of their task code
+and config (:attr:`Job.task`), so a row computed before a physics, preset or
+task change is not taken as done by a resumed sweep."""
 
 from __future__ import annotations
 
@@ -103,6 +104,9 @@ class Job:
     agent: Mapping[str, Any] | None = None
     quick: bool = False
     params_toml: str | None = None
+    #: what the result depends on beyond the physics (the scenario's task code and
+    #: config, :attr:`hdgym.sweep.scenarios.Scenario.task_digest`); '' for nothing
+    task: str = ""
     #: where a job may keep files (trained policies); not an input, not hashed
     workdir: str | None = field(default=None, compare=False)
 
@@ -114,6 +118,8 @@ class Job:
                "agent": self.agent, "quick": self.quick, "physics": self.physics}
         if self.params_toml is not None:
             out["params_sha256"] = hashlib.sha256(self.params_toml.encode()).hexdigest()
+        if self.task:  # only when set, so the ids of scenarios without one stay as they were
+            out["task"] = self.task
         return out
 
     @property

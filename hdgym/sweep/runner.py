@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, replace
 from importlib import resources
@@ -18,6 +19,14 @@ _BUNDLED = resources.files("hdgym.sweep.specs")
 #: where rows computed on other physics (another :func:`~hdgym.sweep.job.physics_fingerprint`
 #: of their preset) go when a sweep resumes
 STALE_FILE = "results.stale.csv"
+
+
+def _task_of(row: dict[str, str]) -> str:
+    """The task digest a row was made for (:attr:`Job.task`, kept in its inputs; '' if none)."""
+    try:
+        return str(json.loads(row.get("inputs") or "{}").get("task", ""))
+    except ValueError:
+        return ""
 
 
 @dataclass(frozen=True)
@@ -60,7 +69,8 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
             summary (``summary.md``, ``summary.png``; also
             ``<summary_dir>/<name>.md/.png`` when the spec sets ``summary_dir``).
             Rows of the spec's presets made on other physics (code, sensors or
-            preset numbers; the ``physics`` column) move to ``results.stale.csv``
+            preset numbers; the ``physics`` column), or for another task (the
+            scenario's task code or config, :attr:`Job.task`), move to ``results.stale.csv``
             and their jobs run again.
         backend: ``"local"`` (process pool) or ``"ray"``.
         address: Ray cluster address (``None``: start Ray locally).
@@ -103,14 +113,24 @@ def run_sweep(spec_path: str | Path, out_dir: str | Path, backend: str = "local"
     columns = list(FIXED_COLUMNS) + (param_columns(jobs[0]) if jobs else [])
     t0 = time.perf_counter()
     ran = errors = 0
-    # physics each preset runs on now; rows made on other physics are set aside
+    # physics each preset runs on now, and the task each scenario runs (Job.task);
+    # rows made on other physics or for another task are set aside
     physics: dict[str, set[str]] = {}
+    tasks: dict[tuple[str, str], set[str]] = {}
     for j in jobs:
         physics.setdefault(j.preset, set()).add(j.physics)
+        tasks.setdefault((j.preset, j.scenario), set()).add(j.task)
+
+    def is_stale(r: dict[str, str]) -> bool:
+        if r.get("preset") not in physics:
+            return False
+        if r.get("physics") not in physics[r["preset"]]:
+            return True
+        now = tasks.get((r["preset"], r.get("scenario", "")))
+        return now is not None and _task_of(r) not in now
+
     with ResultsStore(out_dir / "results.csv", columns) as store:
-        stale = store.set_aside(
-            lambda r: r.get("preset") in physics and r.get("physics") not in physics[r["preset"]],
-            out_dir / STALE_FILE)
+        stale = store.set_aside(is_stale, out_dir / STALE_FILE)
         todo = [j for j in jobs if j.job_id not in store.done]
         skipped = len(jobs) - len(todo)
         bar = None

@@ -68,6 +68,10 @@ class Scenario:
         options: allowed option names and their defaults (``None``: any
             option is passed through unchecked).
         check_slot: validates one controller/agent config before the sweep.
+        task_digest: ``task_digest(slot) -> str`` names what a job's result
+            depends on beyond the drive's physics (for ``rl_train``: the env's
+            task code and the agent config), hashed into the job id so a
+            resumed sweep reruns its jobs when that changes; ``None``: nothing.
     """
 
     name: str
@@ -76,6 +80,7 @@ class Scenario:
     options: Mapping[str, Any] | None = None
     check_slot: Callable[[Mapping[str, Any]], None] | None = None
     doc: str = ""
+    task_digest: Callable[[Mapping[str, Any] | None], str] | None = None
 
     def option(self, job: Any, key: str) -> Any:
         opts = self.options or {}
@@ -86,16 +91,18 @@ _REGISTRY: dict[str, Scenario] = {}
 
 
 def register(name: str, *, needs: str | None = None, options: Mapping[str, Any] | None = None,
-             check_slot: Callable[[Mapping[str, Any]], None] | None = None
+             check_slot: Callable[[Mapping[str, Any]], None] | None = None,
+             task_digest: Callable[[Mapping[str, Any] | None], str] | None = None
              ) -> Callable[[ScenarioFn], ScenarioFn]:
-    """Decorator: register ``fn(params, job) -> metrics`` under ``name``."""
+    """Decorator: register ``fn(params, job) -> metrics`` under ``name``
+    (the keywords are :class:`Scenario`'s attributes)."""
     if needs not in (None, "controller", "agent"):
         raise ValueError(f"needs must be None, 'controller' or 'agent', got {needs!r}")
 
     def deco(fn: ScenarioFn) -> ScenarioFn:
         _REGISTRY[name] = Scenario(name, fn, needs, options, check_slot,
                                    (fn.__doc__ or "").strip().splitlines()[0] if fn.__doc__
-                                   else "")
+                                   else "", task_digest)
         return fn
 
     return deco
@@ -142,7 +149,8 @@ def _imported_scenario(name: str, why: str = "") -> Scenario:
                          f"{why}")
     for sc in _REGISTRY.values():
         if sc.fn is fn:
-            return Scenario(name, sc.fn, sc.needs, sc.options, sc.check_slot, sc.doc)
+            return Scenario(name, sc.fn, sc.needs, sc.options, sc.check_slot, sc.doc,
+                            sc.task_digest)
     return Scenario(name, fn, getattr(fn, "needs", None), None, None,
                     (fn.__doc__ or "").strip())
 

@@ -144,7 +144,8 @@ class SweepSpec:
         for preset in self.presets:
             for point in self.grid_points():
                 for scen in self.scenarios:
-                    kind = get_scenario(scen).needs
+                    sc = get_scenario(scen)
+                    kind = sc.needs
                     slots: Sequence[dict[str, Any] | None]
                     if kind == "controller":
                         slots = self.controllers
@@ -153,13 +154,15 @@ class SweepSpec:
                     else:
                         slots = [None]
                     for slot in slots:
+                        task = sc.task_digest(slot) if sc.task_digest is not None else ""
                         for seed in self.seeds:
                             out.append(Job(
                                 preset=preset, scenario=scen, seed=seed, grid=point,
                                 spreads=dict(self.spreads), options=self.options.get(scen, {}),
                                 controller=slot if kind == "controller" else None,
                                 agent=slot if kind == "agent" else None,
-                                quick=self.quick, params_toml=self.preset_files.get(preset)))
+                                quick=self.quick, params_toml=self.preset_files.get(preset),
+                                task=task))
         return out
 
 
