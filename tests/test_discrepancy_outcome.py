@@ -42,7 +42,8 @@ def test_a_clipped_current_is_not_noise_or_slack():
 
 def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     from hdgym.discrepancy.fitting import fit
-    from hdgym.discrepancy.workflow import THRESHOLD, _spring
+    from hdgym.discrepancy.spring_search import search_spring
+    from hdgym.discrepancy.workflow import ESCALATED_GAIN, MIN_SCORE, THRESHOLD, _search
     from hdgym.params import preset
     from hdgym.record import Record
     from hdgym.sim import Simulator
@@ -66,7 +67,9 @@ def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     prob.set_compare("time")
     assert prob.noise is prob.noise_time and prob.segment == 0.5 and len(prob.names) == 3
     # the workflow's spring search names it there
-    accepted, _, _, stuck = _spring(prob, None, base, given, [f.path for f in fps], THRESHOLD,
-                                    10, 20)
+    paths = [f.path for f in fps]
+    accepted, _, _, stuck = search_spring(
+        prob, None, base, given, 10, MIN_SCORE,
+        lambda cur: _search(prob, None, cur, given, paths, THRESHOLD, 10, 20, ESCALATED_GAIN))
     assert accepted is not None and accepted[0]["name"] == "nonlinear_stiffness"
     assert prob.compare == "spring" and not stuck
