@@ -65,6 +65,12 @@ class Diagnosis:
     untestable_why: dict[str, str] = field(default_factory=dict)
     """Effect -> what the record would have to show for it to be seen."""
     next_experiments: list[str] = field(default_factory=list)
+    compare: str = "time"
+    """What before and after are NMSE of: ``time`` (the channels) or ``spring`` (the spring
+    curve of a locked output, where the effect was found; :mod:`.spring`)."""
+    unexplained_channels: dict[str, str] = field(default_factory=dict)
+    """Channels whose own residual is neither noise nor fit slack (channel -> why;
+    :func:`.floor.unexplained_channels`)."""
     """``hdgym experiment ...`` commands whose records would decide what this one cannot."""
 
     @property

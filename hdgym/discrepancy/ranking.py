@@ -125,6 +125,8 @@ def rank_candidates(problem: Problem, current: JointParams,
     for name, eff in REGISTRY.items():
         if name in current.effects or not eff.testable(problem.scales):
             continue
+        if problem.compare not in eff.compare:  # (the spring curve shows only the spring)
+            continue
         if any(req not in current.effects for req in eff.requires):
             continue
         sig = R.signature(eff.signature, res, w, ctx)

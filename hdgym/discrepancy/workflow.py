@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import replace
 
 import numpy as np
 
@@ -44,11 +45,13 @@ from hdgym.record import Record
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .outcome import NOISE_FACTOR, outcome_of
+from .floor import unexplained_channels
+from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
+from .spring_search import search_spring
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -176,10 +179,13 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
         gain = current.nmse["mean"] - res.nmse["mean"]
-        if rel < threshold or gain < MIN_GAIN:
+        # on the spring curve the noise of a bin mean, not a fixed share, is the least gain
+        min_gain = (MIN_GAIN if problem.compare == "time"
+                    else NOISE_FACTOR * problem.noise["mean"])
+        if rel < threshold or gain < min_gain:
             reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
                            f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
-                           f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+                           f"{gain:.3g} points (threshold {min_gain:.3g})")
             continue
         polished = fit(problem, res.params,
                        model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
@@ -350,6 +356,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     chosen = problem.segment
     prog.update(1)
     steps: list[Step] = []
+    spring_stuck: dict[str, str] = {}
     conclusion = ""
     candidates: list[dict] = []
     for _ in range(max_steps):
@@ -374,6 +381,17 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                               nfev_trial, nfev_polish)
             if found is not None:
                 accepted, candidates, current = found
+                escalated = True
+        if (accepted is None and auto and not problem.inverse and not steps
+                and problem.locked and problem.compare == "time"):  # then the spring curve
+            found_s, cands_s, on_curve, spring_stuck = search_spring(
+                problem, vprob, current, params, nfev_trial, MIN_SCORE, lambda cur: _search(
+                    problem, vprob, cur, params, base_paths, threshold, nfev_trial,
+                    nfev_polish, ESCALATED_GAIN))
+            untestable_why = {n: w for n, w in untestable_why.items()  # compared on the curve
+                              if not REGISTRY[n].testable(replace(problem.scales, spring=True))}
+            if found_s is not None:
+                accepted, candidates, current, before = found_s, cands_s, on_curve, on_curve
                 escalated = True
         if accepted is None:
             conclusion = reason
@@ -421,14 +439,22 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                       conclusion)
         before = current
     prog.close()
-    if before.nmse is not None and problem.segment != chosen:  # escalated: report on it
+    if (before.nmse is not None and problem.segment != chosen
+            and problem.compare == "time"):  # escalated: report on it
         nm = problem.nmse(before.params)
         before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
     judged = vprob or problem
-    final = judged.nmse(current.params)["mean"]
+    final_channels = judged.nmse(current.params)
+    final = final_channels["mean"]
+    stuck: dict[str, str] = dict(spring_stuck)
+    if at_noise_level(final, judged.noise["mean"]):
+        # the mean can hide one channel that alone shows what the model lacks
+        stuck |= unexplained_channels(judged, current.params,
+                                     model_params(current.params, judged.scales, params),
+                                     final_channels, NOISE_FACTOR)
     for c in candidates:  # effects the record's noise would hide at the size it suggests
         if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
             untestable_why[c["name"]] = (
@@ -437,7 +463,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, params)
+                                untestable_why, params, stuck)
+    if stuck:
+        conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
@@ -448,6 +476,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
+        unexplained_channels=stuck, compare=problem.compare,
         horizon=None if problem.inverse else problem.segment,
         noise=judged.noise, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
