@@ -7,19 +7,23 @@ policies, the page.
 Steps, in order:
 
 1. **Fronts** (:mod:`agents.front`): every classical family tuned on 64
-   training episodes and measured on 200 held-out episodes, for
-   ``resonance_ppo`` (torque sensor) and ``resonance_ppo_notorque``; written to
-   ``--fronts-dir`` (default ``runs/rl``) as ``front_<config>.json``.
-2. **Rules** (:mod:`agents.rules`) on the ``resonance_ppo`` front: the
-   deadline, then the rating at that deadline, the long deadline.
+   training episodes and measured on 200 held-out episodes, on each variant
+   of :data:`agents.report.VARIANTS` (its config's env: ``resonance_ppo``,
+   ``resonance_ppo_notorque``; the Long variant on its 6 s episodes, deadlines
+   :data:`agents.front.LONG_DEADLINES`); written to ``--fronts-dir`` (default
+   ``runs/rl``) as ``front_<variant id>.json``.
+2. **Rules** (:mod:`agents.rules`): on the default variant's front the
+   deadline, then the rating at that deadline; on the Long variant's front the
+   long deadline at that rating.
 3. **Check** the registered constants of ``hdgym/envs/resonance.py``
-   (``DEADLINE``, ``LONG_DEADLINE``, ``GEAR_RATINGS``). If they differ from the
+   (``DEADLINE``, ``LONG_DEADLINE``, ``GEAR_RATINGS``; ``LONG_DEADLINE`` and
+   ``LONG_EPISODE`` also as registered in ``hdgym.envs``). If they differ from the
    rules the command stops (exit 3) and prints the lines to set; after the
    edit, ``--reuse-fronts`` continues from step 4 without recomputing the fronts
    (they do not depend on the constants). ``--quick`` only prints the
    comparison (its small fronts are not the rule's).
-4. **KE feedforward** tuned on top of the best pick at the rating and deadline,
-   added to both fronts.
+4. **KE feedforward** tuned on top of the best pick at the rating and deadline
+   (on the long front: the long deadline), added to every front.
 5. **Training** (:mod:`agents.train`) of both configs into
    ``runs/<config>-s0``; the final policies are copied to ``agents/policies/``
    (``--quick``: 4,096 agent steps into ``--fronts-dir``, nothing copied).
@@ -27,8 +31,9 @@ Steps, in order:
    ``runs/rl-quick`` with ``--quick``; the committed page is ``--out
    results/rl``), comparing with the committed ``results/rl/evaluation.json``.
 
-Measured on the shared 2-core machine (other jobs running): each front 1-2.5 min,
-each training run 1.5-2.5 min, the page 1-3.5 min; the whole command 6-10 min.
+Measured on the shared 2-core machine (other jobs running): each 3 s front 1-2.5 min,
+the long front about twice that, each training run 1.5-2.5 min (longer when the machine
+is busy), the page 1-3.5 min; the whole command about 10-25 min.
 ``--quick`` takes well under a minute.
 """
 
@@ -46,23 +51,30 @@ from typing import Any
 from agents import report
 from agents.common import load_config
 from agents.families import default_grids
-from agents.front import add_ke, tune_and_test
+from agents.front import DEADLINES, LONG_DEADLINES, add_ke, tune_and_test
 from agents.rules import check_constants, registered, rules
 from hdgym.files import check_out
 
 CONFIGS = ("resonance_ppo", "resonance_ppo_notorque")
+#: the variant whose front the deadline and rating rules read, and the long deadline's
+MAIN, LONG = "HarmonicDriveResonance-v0", "HarmonicDriveResonanceLong-v0"
 TRAIN_EPISODES, TEST_EPISODES, CHECK_EPISODES = 64, 200, 200
 QUICK_EPISODES, QUICK_TIMESTEPS = 8, 4096
 I_MAX = 6.0  # A, the preset's amplifier (the task's default)
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def grids_for(config: str, quick: bool) -> dict[str, list[dict[str, float]]]:
-    """The families of a config: without a torque sensor, damping from the encoders."""
+def grids_for(variant: str, quick: bool) -> dict[str, list[dict[str, float]]]:
+    """The families of a variant: without a torque sensor, damping from the encoders."""
     g = default_grids(I_MAX, quick)
-    if "notorque" in config:
+    if variant.endswith("NoTorqueSensor-v0"):
         g = {("damp_enc" if k == "damp" else k): v for k, v in g.items() if k != "damp_full"}
     return g
+
+
+def deadlines_for(variant: str) -> tuple[float, ...]:
+    """The front's deadlines (s): the long variant's run to its 6 s episodes."""
+    return LONG_DEADLINES if variant == LONG else DEADLINES
 
 
 def log(msg: str) -> None:
@@ -83,11 +95,11 @@ def commit() -> str:
 
 def base_fronts(quick: bool, n_train: int, n_test: int, fronts_dir: Path, reuse: bool
                 ) -> dict[str, dict[str, Any]]:
-    """Step 1: the fronts of both configs without KE (read back with ``reuse``)."""
+    """Step 1: the fronts of every variant without KE (read back with ``reuse``)."""
     train = list(range(report.TRAIN_SEED, report.TRAIN_SEED + n_train))
     test = list(range(report.TEST_SEED, report.TEST_SEED + n_test))
     out = {}
-    for name in CONFIGS:
+    for name in report.VARIANTS:
         path = fronts_dir / f"front_{name}.json"
         if reuse:
             if not path.is_file():
@@ -100,8 +112,10 @@ def base_fronts(quick: bool, n_train: int, n_test: int, fronts_dir: Path, reuse:
             log(f"{name}: front read from {path} (computed at {f.get('commit', '?')})")
         else:
             t0 = time.perf_counter()
-            f = tune_and_test(load_config(name), grids_for(name, quick), train, test, log=log)
-            f["config"], f["commit"] = name, commit()
+            cfg, _ = report.variant_config(name)
+            f = tune_and_test(cfg, grids_for(name, quick), train, test,
+                              deadlines=deadlines_for(name), log=log)
+            f["variant"], f["config"], f["commit"] = name, report.VARIANTS[name][0], commit()
             f["wall_time_s"] = round(time.perf_counter() - t0, 1)
             log(f"{name}: front in {f['wall_time_s']:.0f} s")
             write_json(path, f)
@@ -117,7 +131,7 @@ def write_json(path: Path, data: Any) -> None:
 
 
 def train_policies(quick: bool, work: Path) -> Path:
-    """Step 5: both configs trained; returns the run folder of ``resonance_ppo``."""
+    """Step 5: every config trained; returns the run folder of ``resonance_ppo``."""
     from agents.train import train
 
     runs = {}
@@ -166,14 +180,14 @@ def main(argv: list[str] | None = None) -> int:
         check_out(out, quick)
         fronts = base_fronts(quick, n_train, n_test, fronts_dir, args.reuse_fronts)
         try:
-            ruled = rules(fronts[CONFIGS[0]])
+            ruled = rules(fronts[MAIN], fronts[LONG])
         except ValueError as exc:
             if not quick:
                 raise
             log(f"quick: the small fronts give no rule values ({exc})")
             ruled = registered()
         log(f"rules: deadline {ruled['deadline']:g} s, rating {ruled['rating']:g} N m, long "
-            f"deadline {ruled['long_deadline']:g} s; registered: {registered()}")
+            f"deadline {ruled['long_deadline']} s; registered: {registered()}")
         edits = check_constants(ruled)
         if edits and not quick:
             print("agents.benchmark: the registered constants disagree with the rules on this "
@@ -188,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         test = list(range(report.TEST_SEED, report.TEST_SEED + n_test))
         paths = []
         for name, f in fronts.items():
-            add_ke(load_config(name), f, reg["rating"], reg["deadline"], I_MAX, train, test,
+            d = reg["long_deadline"] if name == LONG else reg["deadline"]
+            add_ke(report.variant_config(name)[0], f, reg["rating"], d, I_MAX, train, test,
                    quick, log)
             paths.append(fronts_dir / f"front_{name}_ke.json")
             write_json(paths[-1], f)

@@ -42,7 +42,6 @@ from agents.baselines import OBS_COS, OBS_OSC, OBS_SIN, OBS_SPEED, OBS_TARGET, d
 from hdgym.params import JointParams
 
 OBS_OUT_SPEED = 1  # measured output speed x ratio / target speed
-OBS_TIME = 9  # time / horizon
 
 FAMILIES = ("const", "pi", "pi_ramp", "damp", "two_phase")
 #: names of the families in reports
@@ -66,15 +65,17 @@ class FamilyController:
             optional ``ke_amp`` (A) and ``ke_phase`` (rad).
         joint: the nominal joint (PI design, amplifier limits).
         speed_scale: the env's speed scale (normalizes the target observation), rad/s.
-        horizon: the env's horizon, s (normalizes the time observation).
-        dt: the call period, s.
+        dt: the call period, s. The controller keeps its own clock (``dt`` per call
+            since :meth:`reset`): the time observation saturates at the env's
+            horizon (3 s) while the long variant's episodes run on to 6 s, and
+            ``pi_ramp`` needs the time all along.
         source: torsion signal of ``damp``: ``"torque"`` (torque sensor) or
             ``"encoders"`` (integrated encoder twist).
         f_n: Hz, the torsional frequency that scales the damping's rate term.
     """
 
     def __init__(self, family: str, params: Mapping[str, Any], joint: JointParams,
-                 speed_scale: float, horizon: float, dt: float, source: str = "torque",
+                 speed_scale: float, dt: float, source: str = "torque",
                  f_n: float = 44.0) -> None:
         if family not in FAMILIES:
             raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
@@ -90,7 +91,6 @@ class FamilyController:
         self.kp, self.ki = d.kp, d.ki
         self.tt = 0.5 * d.kp / d.ki
         self.speed_scale = speed_scale
-        self.horizon = horizon
         self.dt = dt
         self.source = source
         self.rate_scale = 1.0 / (2.0 * math.pi * f_n * dt)
@@ -103,6 +103,7 @@ class FamilyController:
         self.prev = np.full(n, np.nan)
         self.twist = np.zeros(n)
         self.switched = np.zeros(n, dtype=bool)
+        self.t = np.zeros(n)  # s, since reset
 
     def _arr(self, name: str, default: float | None = None) -> np.ndarray:
         if name not in self.p:
@@ -136,7 +137,8 @@ class FamilyController:
         """Current command, A, of every env."""
         target = obs[:, OBS_TARGET] * self.speed_scale
         speed = obs[:, OBS_SPEED] * target
-        t = obs[:, 9] * self.horizon
+        t = self.t.copy()
+        self.t += self.dt
         f = self.family
         if f == "const":
             u = self._arr("level").copy()
@@ -189,11 +191,13 @@ def default_grids(i_max: float, quick: bool = False) -> dict[str, list[dict[str,
 
     Keys: :data:`FAMILY_LABELS` names. Currents span the trap's plateau
     (Tuttle: 2.8-4.0 A settle in it on joint 1) up to full current; ramp
-    rates span run-ups of about 0.8-3 s to the target.
+    rates span run-ups of about 0.8-5.5 s to the target (the slowest ones matter on the
+    long variant's 6 s episodes only).
     """
     deg = math.radians
     levels = np.round(np.linspace(0.6, 1.0, 3 if quick else 9) * i_max, 3).tolist()
-    rates = [deg(r) for r in ((4000, 8000) if quick else (3500, 4500, 5500, 7000, 9000, 12000))]
+    rates = [deg(r) for r in ((4000, 8000) if quick else
+                              (2000, 2500, 3000, 3500, 4500, 5500, 7000, 9000, 12000))]
     phases = [deg(p) for p in ((0, 90) if quick else (0, 90, 180, 270))]
     amps = [0.1 * i_max, 0.25 * i_max] if quick else [0.05 * i_max, 0.1 * i_max, 0.2 * i_max,
                                                        0.35 * i_max]

@@ -37,8 +37,11 @@ from agents.families import FamilyController, default_grids, family_of, ke_grid,
 
 #: N m, the torque caps of the front
 CAPS = tuple(range(140, 401, 10))
-#: s, the deadlines of the front
+#: s, the deadlines of the front (3 s episodes)
 DEADLINES = (1.0, 1.25, 1.5, 2.0, 2.5, 3.0)
+#: s, the deadlines of the long front (the long variant's 6 s episodes): from the default
+#: deadline to half a second before the episode ends, as the default front's last
+LONG_DEADLINES = (2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5)
 NO_LIMIT = 1e9  # N m: the front runs uncut
 
 
@@ -113,7 +116,7 @@ def controller(cfg: Mapping[str, Any], name: str, params: Mapping[str, Any]) -> 
     fam, source = family_of(name)
     if not b.sensor_params.torque_sensor and fam == "damp":
         source = "encoders"
-    ctl = FamilyController(fam, params, b.params, b.speed_scale, b.horizon, b.ctrl_dt, source)
+    ctl = FamilyController(fam, params, b.params, b.speed_scale, b.ctrl_dt, source)
     probe.close()
     return ctl
 

@@ -27,11 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from agents.common import load_config, load_policy, policy_config
+from agents.common import load_config, load_policy, obs_options, policy_config
 from agents.families import default_grids, label
 from agents.front import (
     CAPS,
     DEADLINES,
+    LONG_DEADLINES,
     add_ke,
     best_classical,
     controller,
@@ -44,7 +45,8 @@ from agents.front import (
 from agents.other_joints import OTHER_TARGET_DEG_S, other_joints
 from agents.report_figures import front_figure, learning_curve, speed_figure
 from agents.rules import RATED_MAXIMUM, check_constants, rules
-from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
+from hdgym.envs import RESONANCE_STEPS
+from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, HORIZON, LONG_DEADLINE, LONG_EPISODE
 from hdgym.files import atomic_write_text, check_out
 
 POLICIES = Path(__file__).parent / "policies"
@@ -56,9 +58,13 @@ VARIANTS: dict[str, tuple[str, str, float | None]] = {
                                                 "resonance_ppo_notorque.zip", None),
 }
 RATING = GEAR_RATINGS["tuttle-joint1"]
+LONG_VAR = "HarmonicDriveResonanceLong-v0"
+#: the long front's panels in front.png
+LONG_PANELS = (3.0, 3.5, 4.0, 5.0)
 TRAIN_SEED, TEST_SEED = 0, 100_000
-HEADER = ("| variant | rating (N m) | deadline (s) | PPO policy, success (95 % CI) | best tuned "
-          "classical family (chosen on training episodes) | its success, held-out (95 % CI) |")
+HEADER = ("| variant | rating (N m) | deadline (s) | episode (s) | PPO policy, success (95 % CI) "
+          "| best tuned classical family (chosen on training episodes) | its success, held-out "
+          "(95 % CI) |")
 
 
 def pct(x: float) -> str:
@@ -93,10 +99,12 @@ def classical_runs(cfg: dict[str, Any], name: str, point: dict[str, float], seed
 
 
 def variant_config(name: str) -> tuple[dict[str, Any], float]:
-    """The env config of a variant (from its agents config) and its deadline."""
+    """The env config of a variant (from its agents config, with the variant's id and
+    episode length) and its deadline."""
     cfg_name, _, deadline = VARIANTS[name]
     cfg = load_config(cfg_name)
     cfg["env"]["id"] = name
+    cfg["env"]["max_episode_steps"] = RESONANCE_STEPS[name]
     if deadline is not None:
         cfg["env"]["kwargs"]["deadline"] = deadline
     return cfg, deadline if deadline is not None else DEADLINE
@@ -168,8 +176,9 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
         if f["test_seeds"] != [TEST_SEED, n_test] or f["train_seeds"] != [TRAIN_SEED, n_train]:
             raise ValueError(f"{path}: seeds {f['train_seeds']}/{f['test_seeds']} are not the "
                              f"report's {[TRAIN_SEED, n_train]}/{[TEST_SEED, n_test]}")
-        given[f["config"]] = f
+        given[f["variant"]] = f
     pol: dict[str, dict[str, np.ndarray]] = {}
+    main_var = "HarmonicDriveResonance-v0"
     rows, details = [], []
     summary: dict[str, Any] = {"variants": {}}
     for var in VARIANTS:
@@ -180,13 +189,11 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
         if var.endswith("NoTorqueSensor-v0"):
             grids = {("damp_enc" if k == "damp" else k): v for k, v in grids.items()
                      if k != "damp_full"}
-        same = next((v for v in fronts if VARIANTS[v][0] == VARIANTS[var][0]), None)
-        if same:
-            front = fronts[same]
-        elif VARIANTS[var][0] in given:
-            front = given[VARIANTS[var][0]]
+        if var in given:
+            front = given[var]
         else:
-            front = tune_and_test(cfg, grids, train_seeds, test_seeds, CAPS, DEADLINES, log)
+            front = tune_and_test(cfg, grids, train_seeds, test_seeds, CAPS,
+                                  LONG_DEADLINES if var == LONG_VAR else DEADLINES, log)
             add_ke(cfg, front, RATING, deadline, 6.0, train_seeds, test_seeds, quick, log)
         fronts[var] = front
         zip_path = policies / zip_name
@@ -194,6 +201,7 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
             model = load_policy(zip_path)
             pcfg = policy_config(zip_path) or cfg
             pcfg["env"]["id"] = var
+            pcfg["env"]["max_episode_steps"] = cfg["env"]["max_episode_steps"]
             pcfg["env"]["kwargs"].update({k: v for k, v in cfg["env"]["kwargs"].items()
                                           if k == "deadline"})
             pol[var] = policy_runs(pcfg, model, test_seeds)
@@ -203,10 +211,12 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
             p_ok = success(pol[var]["time_to_target"], pol[var]["peak_torque"], RATING,
                            deadline)
         i, j = front["deadlines"].index(deadline), front["caps"].index(RATING)
-        rows.append(f"| `{var}` | {RATING:.0f} | {deadline:g} | "
+        episode = int(cfg["env"]["max_episode_steps"]) / 1000  # s, 1 ms control periods
+        rows.append(f"| `{var}` | {RATING:.0f} | {deadline:g} | {episode:g} | "
                     f"{ci(float(p_ok.sum()), n_test) if p_ok is not None else 'no policy'} | "
                     f"{label(fam)} | {ci(best['test'] * n_test, n_test)} |")
-        det = [f"**`{var}`** (rating {RATING:.0f} N m, deadline {deadline:g} s), {n_test} "
+        det = [f"**`{var}`** (rating {RATING:.0f} N m, deadline {deadline:g} s, episodes of "
+               f"{episode:g} s), {n_test} "
                f"held-out episodes; each family's pick tuned on {n_train} training episodes:",
                "", "| controller | tuned parameters | success, training | success, held-out "
                "(95 % CI) |", "|---|---|---|---|"]
@@ -217,7 +227,9 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
                        f"{ci(e['test'] * n_test, n_test)} |")
         if p_ok is not None:
             p = pol[var]
-            det.append(f"| PPO policy (`agents/policies/{zip_name}`) | - | - | "
+            trained = ("" if VARIANTS[var][0] != VARIANTS[main_var][0] or var == main_var
+                       else f", trained on `{main_var}`")
+            det.append(f"| PPO policy (`agents/policies/{zip_name}`{trained}) | - | - | "
                        f"{ci(float(p_ok.sum()), n_test)} |")
             reach = p["time_to_target"][np.isfinite(p["time_to_target"])]
             mean_t = f"{reach.mean():.2f} s" if reach.size else "- (never reached)"
@@ -226,24 +238,23 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
                     "/ max)."]
         details.append("\n".join(det))
         summary["variants"][var] = {
-            "rating": RATING, "deadline": deadline, "episodes": n_test,
+            "rating": RATING, "deadline": deadline, "episode_s": episode, "episodes": n_test,
             "policy_success": None if p_ok is None else float(p_ok.mean()),
             "best_classical": fam, "best_classical_point": best["point"],
             "best_classical_success": best["test"], "best_classical_ci": best["ci"]}
-    main_var = "HarmonicDriveResonance-v0"
     checks = ""
     if args.check_episodes and main_var in pol:
         checks = robustness(main_var, fronts[main_var], args.check_episodes, summary,
                             policies)
-    front_figure({k: v for k, v in fronts.items() if VARIANTS[k][2] is None or k == main_var},
-                 pol, out / "front.png", RATING)
+    front_figure(fronts, pol, out / "front.png", RATING, {LONG_VAR: LONG_PANELS})
     try:
-        ruled = rules(fronts[main_var])
+        ruled = rules(fronts[main_var], fronts[LONG_VAR])
     except ValueError as exc:
         if not quick:
             raise
         ruled = {"deadline": math.nan, "rating": math.nan, "long_deadline": math.nan,
-                 "uncapped_train_success": {}, "best_train_success": {}, "error": str(exc)}
+                 "uncapped_train_success": {}, "best_train_success": {},
+                 "long_best_train_success": {}, "error": str(exc)}
     edits = check_constants(ruled)
     if edits and not quick:
         raise ValueError("the registered constants disagree with the rules on this front; set "
@@ -269,6 +280,24 @@ def build(args: argparse.Namespace, quick: bool, previous: dict[str, Any] | None
         md = md.replace("\n\n", f"\n\n**Note.** {args.note}\n\n", 1)
     atomic_write_text(out / "evaluation.md", md)
     return md
+
+
+def observation_text(config: str) -> str:
+    """What a config's policy sees besides the env's observation (``[policy] history``,
+    ``normalize_obs``), for the page."""
+    history, norm = obs_options(load_config(config))
+    parts = []
+    if history > 1:
+        parts.append(f"its last {history} observations stacked (each with the action before "
+                     "it)")
+    if norm:
+        parts.append("the observation standardized by its running mean and variance over "
+                     "training")
+    if not parts:
+        return f"Its policy (`{config}`) sees the env's observation as it is."
+    return (f"Its policy (`{config}`) sees " + " and ".join(parts) + f" (`[policy]` of "
+            f"`agents/configs/{config}.toml`, which gives the training-episode measurements "
+            "behind the choice).")
 
 
 def fmt_point(p: dict[str, float]) -> str:
@@ -352,8 +381,8 @@ def moved(previous: dict[str, Any] | None, now: dict[str, Any]) -> str:
     lines = [f"Against the page this one replaces (its fronts computed at commit "
              f"{previous.get('commit', 'unknown, before the rules were code')}; this page's: "
              f"{now.get('commit', 'unknown')}):", "",
-             "| variant | rating (N m) | deadline (s) | PPO policy | best classical family | "
-             "its success |", "|---|---|---|---|---|---|"]
+             "| variant | rating (N m) | deadline (s) | episode (s) | PPO policy | best classical "
+             "family | its success |", "|---|---|---|---|---|---|---|"]
     notes = ["The rating and the deadline are set by the rules on this page's front; success "
              "moves with them (a cap and a deadline that differ by 10 N m or 0.5 s move every "
              "column) and with any physics change between the two fronts' commits."]
@@ -366,9 +395,14 @@ def moved(previous: dict[str, Any] | None, now: dict[str, Any]) -> str:
 
     for var, v in now["variants"].items():
         o = previous.get("variants", {}).get(var, {})
+        if o and o.get("episode_s", 3.0) != v["episode_s"]:
+            notes.append(f"`{var}`: episodes of {o.get('episode_s', 3.0):g} s before, "
+                         f"{v['episode_s']:g} s now, with the deadline of its own rule: "
+                         "before and after are different tasks.")
         lines.append(
             f"| `{var}` | {cell(o.get('rating'), v['rating'], lambda x: f'{x:g}')} | "
             f"{cell(o.get('deadline'), v['deadline'], lambda x: f'{x:g}')} | "
+            f"{cell(o.get('episode_s', 3.0) if o else None, v['episode_s'], lambda x: f'{x:g}')} | "
             f"{p(o.get('policy_success'))} -> {p(v['policy_success'])} | "
             f"{cell(label(o['best_classical']) if o else None, label(v['best_classical']), str)}"
             f" | {p(o.get('best_classical_success'))} -> {p(v['best_classical_success'])} |")
@@ -420,6 +454,9 @@ def page(rows: list[str], details: list[str], checks: str, ruled: dict[str, Any]
     unc = ", ".join(f"{label(k)} {pct(v)}" for k, v in ruled["uncapped_train_success"].items())
     near = [c for c in ruled["best_train_success"] if abs(c - ruled["rating"]) <= 20]
     bat = ", ".join(f"{c:g} N m: {pct(ruled['best_train_success'][c])}" for c in near)
+    notorque_txt = observation_text("resonance_ppo_notorque")
+    long_txt = ", ".join(f"{d:g} s: {pct(v)}"
+                         for d, v in ruled.get("long_best_train_success", {}).items())
     head = "**Quick smoke-test run: small grids, few episodes; not a result.**\n\n" if quick \
         else ""
     return f"""# Resonance trap: the learned policy against tuned classical controllers
@@ -452,16 +489,30 @@ and KE amplitude): bring the motor from rest through the 2x-order resonance trap
   succeeds in ≥ 50 % of the training episodes, and not above the rated maximum
   (measured: {ruled["rating"]:g} N m; best training success at caps {bat}).
 * **Deadline: {DEADLINE:g} s**, the target (speed filtered with 25 ms within 5 %) must be
-  reached by then; the episode lasts 3 s, the rating holds for all of it. The rule
+  reached by then; the episode lasts {HORIZON:g} s, the rating holds for all of it. The rule
   (`agents.rules.deadline_rule`): the shortest deadline of the front at which every
   classical family reaches the target in ≥ 90 % of the training episodes when the torque
   is not capped (measured: {ruled["deadline"]:g} s; uncapped training success at that
   deadline: {unc}). The rules see the training episodes only, never the policy.
-* Variants: `HarmonicDriveResonanceLong-v0` (deadline {LONG_DEADLINE:g} s, the whole
-  episode; `agents.rules.long_deadline_rule`);
-  `HarmonicDriveResonanceNoTorqueSensor-v0` (encoders and current only; the classical
-  damping uses the twist integrated from the two encoders' velocities). Another joint's
-  trap: not registered (see the end).
+* **Long deadline: {LONG_DEADLINE:g} s** on `HarmonicDriveResonanceLong-v0`, whose episode
+  lasts {LONG_EPISODE:g} s (rating as above): the variant asks what time buys. The rule
+  (`agents.rules.long_deadline_rule`) reads the *long front*, the same families tuned on
+  the variant's {LONG_EPISODE:g} s training episodes with deadlines up to
+  {max(LONG_DEADLINES):g} s: at the rating, the shortest deadline from which the best
+  family's training success gains no more than one training episode up to
+  {max(LONG_DEADLINES):g} s, i.e. where more time stops helping tuned classical control
+  (measured: {ruled["long_deadline"]:g} s; best training success at {RATING:.0f} N m by
+  deadline: {long_txt}). It must lie past the deadline and before the front's last
+  deadline (else the episode must be longer). The time observation keeps its
+  {HORIZON:g} s scale (it saturates there, as beyond the default variant's end), so the
+  policy evaluated on Long is the default variant's (`resonance_ppo.zip`, trained on
+  {HORIZON:g} s episodes with the {DEADLINE:g} s deadline), unchanged; the classical
+  controllers keep their own clock. The target below is not expected on this variant: its
+  deadline sits where classical control has had all the time that helps it, so it shows
+  how much of the policy's lead on the default variant is the deadline.
+* `HarmonicDriveResonanceNoTorqueSensor-v0` (encoders and current only; the classical
+  damping uses the twist integrated from the two encoders' velocities). {notorque_txt}
+  Another joint's trap: not registered (see the end).
 
 Classical controllers see the same measured observation as the policy and act every
 control period (1 ms); the policy acts every 5 ms. Training episodes (tuning): env seeds
@@ -471,7 +522,7 @@ control period (1 ms); the policy acts every 5 ms. Training episodes (tuning): e
 ## Result
 
 {HEADER}
-|---|---|---|---|---|---|
+|---|---|---|---|---|---|---|
 {chr(10).join(rows)}
 
 The families (`agents/families.py`): constant current; the PI speed loop of
@@ -489,8 +540,10 @@ best point at each cap and deadline is re-run on the held-out episodes.
 `front.png`: success on the held-out episodes against the torque cap R, one panel per
 deadline; each family's curve is its best training-episode pick at that cap and deadline
 (so a family's curve may use a different tuning at each point); black: the PPO policy
-(one policy, trained at R = {RATING:.0f} N m, D = {DEADLINE:g} s); dotted: the rating.
-Data: `front.json`.
+(trained at R = {RATING:.0f} N m, D = {DEADLINE:g} s; the same policy on every row but
+the no-torque-sensor one); dotted: the rating. The Long row's panels are deadlines of the
+long front ({", ".join(f"{d:g}" for d in LONG_PANELS)} s) on its {LONG_EPISODE:g} s
+episodes. Data: `front.json`.
 
 ![speed](speed_vs_time.png)
 

@@ -20,18 +20,25 @@ FIG_DEADLINES = (1.5, 2.0, 2.5, 3.0)
 
 
 def front_figure(fronts: dict[str, Any], pol: dict[str, dict[str, np.ndarray]],
-                 out: Path, rating: float) -> None:
-    """Success against torque cap, one panel per (variant, deadline); ``rating`` N m."""
+                 out: Path, rating: float,
+                 panels: dict[str, tuple[float, ...]] | None = None) -> None:
+    """Success against torque cap, one panel per (variant, deadline); ``rating`` N m;
+    ``panels``: a variant's deadlines (s) where not :data:`FIG_DEADLINES`."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     names = list(fronts)
-    fig, axes = plt.subplots(len(names), len(FIG_DEADLINES), figsize=(4 * len(FIG_DEADLINES),
+    panels = panels or {}
+    ncol = max([len(FIG_DEADLINES)] + [len(v) for v in panels.values()])
+    fig, axes = plt.subplots(len(names), ncol, figsize=(4 * ncol,
                              3.2 * len(names)), sharex=True, sharey=True, squeeze=False)
     for r, var in enumerate(names):
         f = fronts[var]
-        for c, d in enumerate(FIG_DEADLINES):
+        cols = panels.get(var, FIG_DEADLINES)
+        for ax in axes[r][len(cols):]:
+            ax.set_visible(False)
+        for c, d in enumerate(cols):
             ax = axes[r][c]
             if d not in f["deadlines"]:
                 ax.set_visible(False)

@@ -18,8 +18,15 @@ in this order:
    but says joint 1's stiffness test reached 35 % of the drive's rated maximum
    torque and that test ended at 100 N m, so the rated maximum is about
    100 / 0.35 = 286 N m.
-3. **Long deadline** (:func:`long_deadline_rule`): the episode's whole horizon
-   (the front's longest deadline), which must be longer than the deadline.
+3. **Long deadline** (:func:`long_deadline_rule`), on the *long front*: the
+   same families measured on the long variant's episodes
+   (:data:`hdgym.envs.resonance.LONG_EPISODE`, 6 s), deadlines up to 5.5 s. At
+   the rating, the shortest deadline from which the best base family's
+   training success gains no more than one training episode up to the long
+   front's longest deadline: past it, more time no longer helps tuned classical
+   control. It must be longer than the deadline and shorter than the long
+   front's longest deadline (else the front does not show where the gain
+   stops, and the long episode must be longer).
 
 "Base families" are the families tuned over the whole front; the KE
 feedforward (``<family>+ke``) is tuned on top of the pick at the rating and
@@ -90,36 +97,71 @@ def rating_rule(front: Mapping[str, Any], deadline: float) -> tuple[float, dict[
                      f"{deadline:g} s deadline")
 
 
-def long_deadline_rule(front: Mapping[str, Any], deadline: float) -> float:
-    """The long variant's deadline (s): the front's longest, the episode's horizon."""
-    d = float(max(front["deadlines"]))
+def long_deadline_rule(long_front: Mapping[str, Any], rating: float, deadline: float
+                       ) -> tuple[float, dict[float, float]]:
+    """The long variant's deadline (s) and the best base family's training success at the
+    rating per deadline of ``long_front`` (measured on the long variant's episodes).
+
+    The shortest deadline whose best training success is within one training episode
+    (``1 / n``, ``n`` the front's training episodes) of the best at the front's longest
+    deadline. Raises ``ValueError`` when that deadline is not longer than ``deadline`` or
+    is the front's longest (the front then shows no deadline where the gain stops)."""
+    j = long_front["caps"].index(rating)
+    fams = base_families(long_front).values()
+    if not fams:
+        raise ValueError("the long front has no base families")
+    best = {float(d): max(f["front"][i][j]["train"] for f in fams)
+            for i, d in enumerate(long_front["deadlines"])}
+    n = long_front.get("train_seeds", [0, 64])[1]
+    last = best[max(best)]
+    d = min(x for x, s in best.items() if s >= last - 1.0 / n - 1e-12)
     if d <= deadline:
         raise ValueError(f"the long deadline {d:g} s is not longer than the deadline "
-                         f"{deadline:g} s")
-    return d
+                         f"{deadline:g} s: more time does not help the classical families")
+    if d >= max(best):
+        raise ValueError(f"the best classical success at {rating:g} N m still grows at the "
+                         f"long front's longest deadline {max(best):g} s; lengthen "
+                         "LONG_EPISODE so the front shows where it stops")
+    return d, best
 
 
-def rules(front: Mapping[str, Any]) -> dict[str, Any]:
-    """All three rules on a front: ``deadline``, ``rating``, ``long_deadline`` and the
-    numbers behind them (``uncapped_train_success`` per family at the deadline,
-    ``best_train_success`` per cap at the deadline)."""
+def rules(front: Mapping[str, Any], long_front: Mapping[str, Any] | None = None
+          ) -> dict[str, Any]:
+    """The three rules: ``deadline``, ``rating`` on ``front`` (the default variant's
+    episodes), ``long_deadline`` on ``long_front`` (the long variant's; without it
+    ``long_deadline`` is None), and the numbers behind them
+    (``uncapped_train_success`` per family at the deadline, ``best_train_success``
+    per cap at the deadline, ``long_best_train_success`` per deadline of the long front
+    at the rating)."""
     d, reach = deadline_rule(front)
     r, best = rating_rule(front, d)
-    return {"deadline": d, "rating": r, "long_deadline": long_deadline_rule(front, d),
-            "uncapped_train_success": reach, "best_train_success": best}
+    out: dict[str, Any] = {"deadline": d, "rating": r, "long_deadline": None,
+                           "uncapped_train_success": reach, "best_train_success": best,
+                           "long_best_train_success": {}}
+    if long_front is not None:
+        out["long_deadline"], out["long_best_train_success"] = long_deadline_rule(
+            long_front, r, d)
+    return out
 
 
 def registered() -> dict[str, float]:
-    """The registered constants of :mod:`hdgym.envs.resonance`."""
-    from hdgym.envs import RESONANCE_VARIANTS
-    from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
+    """The registered constants of :mod:`hdgym.envs.resonance` (and ``long_episode``, s).
+
+    Raises ``ValueError`` when the Long variant's registration (written apart in
+    :mod:`hdgym.envs` so that registering stays light) disagrees with them."""
+    from hdgym.envs import RESONANCE_STEPS, RESONANCE_VARIANTS
+    from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE, LONG_EPISODE
 
     long_id = "HarmonicDriveResonanceLong-v0"
-    if RESONANCE_VARIANTS[long_id]["deadline"] != LONG_DEADLINE:  # registered apart (light)
+    if RESONANCE_VARIANTS[long_id].get("deadline") != LONG_DEADLINE:
         raise ValueError(f"{long_id} is registered with deadline "
-                         f"{RESONANCE_VARIANTS[long_id]['deadline']} s, LONG_DEADLINE is "
+                         f"{RESONANCE_VARIANTS[long_id].get('deadline')} s, LONG_DEADLINE is "
                          f"{LONG_DEADLINE} s")
-    return {"deadline": DEADLINE, "rating": GEAR_RATINGS[PRESET], "long_deadline": LONG_DEADLINE}
+    if RESONANCE_STEPS[long_id] != round(LONG_EPISODE * 1000):
+        raise ValueError(f"{long_id} is registered with {RESONANCE_STEPS[long_id]} steps, "
+                         f"LONG_EPISODE is {LONG_EPISODE} s of 1 ms periods")
+    return {"deadline": DEADLINE, "rating": GEAR_RATINGS[PRESET], "long_deadline": LONG_DEADLINE,
+            "long_episode": LONG_EPISODE}
 
 
 CONSTANT_NAMES = {"deadline": "DEADLINE", "rating": f'GEAR_RATINGS["{PRESET}"]',
@@ -129,7 +171,9 @@ CONSTANT_NAMES = {"deadline": "DEADLINE", "rating": f'GEAR_RATINGS["{PRESET}"]',
 def check_constants(ruled: Mapping[str, Any], have: Mapping[str, float] | None = None
                     ) -> list[str]:
     """The edits to hdgym/envs/resonance.py that make its constants follow the rules
-    (``NAME = value`` lines; empty when they agree)."""
+    (``NAME = value`` lines; empty when they agree; a rule value of None, e.g. no long
+    front given, is not checked). ``LONG_DEADLINE`` is also written in
+    ``hdgym.envs.RESONANCE_VARIANTS``."""
     have = registered() if have is None else have
     return [f"{CONSTANT_NAMES[k]} = {float(ruled[k])!r}" for k in CONSTANT_NAMES
-            if abs(float(ruled[k]) - float(have[k])) > 1e-9]
+            if ruled.get(k) is not None and abs(float(ruled[k]) - float(have[k])) > 1e-9]

@@ -75,20 +75,25 @@ def test_classical_controllers_act_every_period_and_the_policy_holds():
 
 def _family(name, params, n=1):
     p = preset("tuttle-joint1")
-    ctl = FamilyController(name, params, p, speed_scale=700.0, horizon=3.0, dt=1e-3)
+    ctl = FamilyController(name, params, p, speed_scale=700.0, dt=1e-3)
     ctl.reset(n)
     return ctl, p
 
 
-def test_ramp_pi_follows_its_ramp_and_two_phase_switches():
-    ctl, p = _family("pi_ramp", {"rate": 100.0, "limit": 6.0}, 2)
+def test_ramp_pi_follows_its_own_clock_and_two_phase_switches():
+    """pi_ramp's reference min(target, rate t) runs on the controller's clock, also past 3 s
+    where the time observation saturates (the long variant's episodes last 6 s)."""
+    ctl, p = _family("pi_ramp", {"rate": 100.0, "limit": 6.0}, 1)
+    obs = np.zeros((1, 10))
+    obs[:, 6] = 500.0 / 700.0  # target 500 rad/s
+    obs[:, 0] = 320.0 / 500.0  # speed 320 rad/s: the reference passes it at 3.2 s
+    obs[:, 9] = 1.0  # the time observation, saturated: not used
+    u = [ctl.command(obs)[0] for _ in range(3500)]  # 3.5 s of 1 ms calls
+    assert ctl.t[0] == pytest.approx(3.5)
+    assert u[3000] < 0.0 < u[3499] <= 6.0
+    ctl, _ = _family("two_phase", {"run": 6.0, "switch": 150.0, "hold": 3.9}, 2)
     obs = np.zeros((2, 10))
     obs[:, 6] = 200.0 / 700.0  # target 200 rad/s
-    obs[:, 0] = 0.0
-    obs[:, 9] = [0.1 / 3.0, 3.0 / 3.0]  # t = 0.1 s (reference 10 rad/s), 3 s (the target)
-    u = ctl.command(obs)
-    assert 0 < u[0] < u[1] <= 6.0
-    ctl, _ = _family("two_phase", {"run": 6.0, "switch": 150.0, "hold": 3.9}, 2)
     obs[:, 0] = [0.5, 0.9]  # 100 and 180 rad/s: below and above the switch
     u = ctl.command(obs)
     assert u[0] == 6.0 and u[1] <= 3.9 + 1e-12
@@ -302,21 +307,46 @@ def _front(train: dict[str, list[list[float]]], caps: list[float],
 
 
 def test_rules_pick_deadline_then_rating_from_the_training_front():
-    from agents.rules import RATED_MAXIMUM, check_constants, rating_rule, rules
+    from agents.rules import (
+        RATED_MAXIMUM,
+        check_constants,
+        long_deadline_rule,
+        rating_rule,
+        rules,
+    )
 
     caps, deadlines = [180.0, 190.0, 200.0, 400.0], [2.0, 2.5, 3.0]
     f = _front({"const": [[0.0, 0.1, 0.2, 0.85], [0.1, 0.2, 0.3, 0.95], [0.2, 0.3, 0.4, 1.0]],
                 "damp": [[0.3, 0.6, 0.7, 1.0], [0.4, 0.5, 0.8, 1.0], [0.5, 0.7, 0.9, 1.0]],
                 # KE feedforward takes no part: tuned at the rating and deadline
                 "damp+ke": [[1.0] * 4] * 3}, caps, deadlines)
-    r = rules(f)
+    # the long front (the Long variant's episodes): best success at the rating (190 N m)
+    # by deadline 2.5, 3, 3.5, 4, 4.5 s is 0.5, 0.6, 0.8, 0.97, 0.98 (ramp) or less (const)
+    longf = _front({"ramp": [[0.0, s, 0.0, 1.0] for s in (0.5, 0.6, 0.8, 0.97, 0.98)],
+                    "const": [[0.0, 0.3, 0.0, 1.0]] * 5,
+                    "ramp+ke": [[1.0] * 4] * 5}, caps, [2.5, 3.0, 3.5, 4.0, 4.5])
+    longf["train_seeds"] = [0, 64]
+    r = rules(f, longf)
     # 2 s: const reaches only 85 % uncapped; 2.5 s: every family >= 90 %
     assert r["deadline"] == 2.5 and r["uncapped_train_success"] == {"const": 0.95, "damp": 1.0}
-    assert r["rating"] == 190.0 and r["long_deadline"] == 3.0  # first cap with best >= 50 %
+    assert r["rating"] == 190.0  # first cap with best >= 50 %
     assert r["best_train_success"][180.0] == 0.4
-    assert check_constants(r, {"deadline": 2.5, "rating": 190.0, "long_deadline": 3.0}) == []
+    # 4 s: within one training episode (1/64) of the 4.5 s best, 3.5 s is not
+    assert r["long_deadline"] == 4.0 and r["long_best_train_success"][3.5] == 0.8
+    assert rules(f)["long_deadline"] is None
+    have = {"deadline": 2.5, "rating": 190.0, "long_deadline": 4.0}
+    assert check_constants(r, have) == []
     assert check_constants(r, {"deadline": 2.0, "rating": 200.0, "long_deadline": 3.0}) == [
-        "DEADLINE = 2.5", 'GEAR_RATINGS["tuttle-joint1"] = 190.0']
+        "DEADLINE = 2.5", 'GEAR_RATINGS["tuttle-joint1"] = 190.0', "LONG_DEADLINE = 4.0"]
+    # still growing at the long front's last deadline: the long episode is too short
+    growing = _front({"ramp": [[0.0, s, 0.0, 1.0] for s in (0.5, 0.6, 0.8, 0.9, 0.99)]},
+                     caps, [2.5, 3.0, 3.5, 4.0, 4.5])
+    with pytest.raises(ValueError, match="still grows"):
+        long_deadline_rule(growing, 190.0, 2.5)
+    # more time does not help: the long deadline would not be longer than the deadline
+    flat = _front({"ramp": [[0.0, 0.6, 0.0, 1.0]] * 3}, caps, [2.5, 3.0, 3.5])
+    with pytest.raises(ValueError, match="not longer"):
+        long_deadline_rule(flat, 190.0, 2.5)
     # a rating above the drive's rated maximum (~286 N m) is refused
     high = _front({"const": [[0.1, 0.2, 0.3, 0.9]]}, [200.0, 250.0, 300.0, 400.0], [2.0])
     assert RATED_MAXIMUM == pytest.approx(285.7, abs=0.1)
@@ -324,8 +354,6 @@ def test_rules_pick_deadline_then_rating_from_the_training_front():
         rating_rule(high, 2.0)
     with pytest.raises(ValueError, match="no deadline"):
         rules(_front({"const": [[0.1, 0.2, 0.3, 0.5]]}, caps, [2.0]))
-    with pytest.raises(ValueError, match="not longer"):
-        rules(_front({"const": [[0.1, 0.6, 0.7, 0.95]]}, caps, [3.0]))
 
 
 def test_committed_front_and_registered_constants_follow_the_rules():
@@ -337,11 +365,12 @@ def test_committed_front_and_registered_constants_follow_the_rules():
 
     res = Path(__file__).resolve().parents[1] / "results" / "rl"
     fronts = json.loads((res / "front.json").read_text())
-    ruled = rules(fronts["HarmonicDriveResonance-v0"])
+    ruled = rules(fronts["HarmonicDriveResonance-v0"], fronts["HarmonicDriveResonanceLong-v0"])
     assert check_constants(ruled) == [], "set these in hdgym/envs/resonance.py"
     ev = json.loads((res / "evaluation.json").read_text())
     reg = registered()
     assert ev["rules"]["deadline"] == reg["deadline"] and ev["rules"]["rating"] == reg["rating"]
+    assert ev["rules"]["long_deadline"] == reg["long_deadline"]
     for name, v in ev["variants"].items():
         assert v["rating"] == reg["rating"]
         assert v["deadline"] == (reg["long_deadline"] if "Long" in name else reg["deadline"])
@@ -355,5 +384,7 @@ def test_benchmark_quick_runs_the_pipeline(tmp_path):
     assert bench_main(["--quick", "--skip-train", "--fronts-dir", str(work)]) == 0
     page = (work / "evaluation.md").read_text()
     assert "Quick smoke-test run" in page and "agents.rules.rating_rule" in page
-    assert (work / "front_resonance_ppo_ke.json").is_file()
+    for var in ("HarmonicDriveResonance-v0", "HarmonicDriveResonanceLong-v0",
+                "HarmonicDriveResonanceNoTorqueSensor-v0"):
+        assert (work / f"front_{var}_ke.json").is_file()
     assert bench_main(["--quick", "--out", "results/rl"]) == 2  # never into results/

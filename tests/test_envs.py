@@ -380,7 +380,7 @@ def test_ppo_smoke():
 def test_resonance_task_rating_deadline_and_success():
     """The registered task: the rating ends an episode, success needs the target by the
     deadline within the rating, and info reports time to target and peak torque."""
-    from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE
+    from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS, LONG_DEADLINE, LONG_EPISODE
 
     env = gym.make("HarmonicDriveResonance-v0")
     u = env.unwrapped
@@ -398,11 +398,14 @@ def test_resonance_task_rating_deadline_and_success():
             break
     assert term and info["peak_torque"] > rating and info["success"] == 0.0
     assert r < -50  # the safety penalty
-    # without the rating (a huge limit) the same run reaches the target: success
+    # without the rating (a huge limit) the same run reaches the target: success; the Long
+    # variant runs LONG_EPISODE with the time observation saturating at the default horizon
     env = gym.make("HarmonicDriveResonanceLong-v0", torque_limit=1e6)
-    assert env.unwrapped.task.deadline == LONG_DEADLINE
+    assert env.unwrapped.task.deadline == LONG_DEADLINE and DEADLINE < LONG_DEADLINE
+    assert env.spec.max_episode_steps == round(LONG_EPISODE * 1000) > 3000
+    assert env.unwrapped.batch.horizon == 3.0
     env.reset(seed=3)
-    for _ in range(3000):
+    for _ in range(env.spec.max_episode_steps):
         _, _, term, trunc, info = env.step(np.array([1.0], dtype=np.float32))
         if term or trunc:
             break
@@ -420,8 +423,8 @@ def test_resonance_task_rating_deadline_and_success():
 
 
 def test_resonance_constants_are_the_ones_the_pages_state():
-    """README and docs/envs.md state the registered deadline and rating (they are set by
-    agents.benchmark's rules, so a change must reach the texts too)."""
+    """README and docs/envs.md state the registered deadline, rating and long deadline (they
+    are set by agents.benchmark's rules, so a change must reach the texts too)."""
     from hdgym.envs.resonance import DEADLINE, GEAR_RATINGS
 
     root = Path(__file__).resolve().parents[1]
@@ -430,6 +433,14 @@ def test_resonance_constants_are_the_ones_the_pages_state():
     for page in ("README.md", "docs/envs.md"):
         assert phrase in (root / page).read_text(), page
     assert f"(default {DEADLINE:g};" in (root / "docs/envs.md").read_text()
+    from hdgym.envs.resonance import LONG_DEADLINE, LONG_EPISODE
+
+    long = (f"`HarmonicDriveResonanceLong-v0` ({LONG_EPISODE:g} s episodes, {LONG_DEADLINE:g} s "
+            "deadline")
+    for page in ("README.md", "docs/envs.md"):
+        assert long in (root / page).read_text(), page
+    assert f"`HarmonicDriveResonanceLong-v0`: {LONG_DEADLINE:g}, on {LONG_EPISODE:g} s" in (
+        root / "docs/envs.md").read_text()
 
 
 def test_resonance_without_torque_sensor_and_saturating_time():

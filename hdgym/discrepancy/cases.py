@@ -310,8 +310,17 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym experiment ...`) whose record would show it; so is one that, at the size the "
         "record suggests, would change the channels by less than their measurement noise. "
         "*Outcome* is *named*, *nothing missing* (final NMSE within 3 x the measurement-noise "
-        "NMSE, or at most 0.5 %) or *unexplained*; a "
+        "NMSE, or at most 0.5 %, and no channel alone unexplained: above 3 x what the fitted "
+        "model shows on a record it made itself and beyond what its fitted parameters can "
+        "change it, `hdgym.discrepancy.floor`) or *unexplained*; a "
         "named effect that leaves more than that is *named; rest unexplained*.",
+        "- On a locked output whose time channels show nothing, the spring curve is searched "
+        "for the spring's effects (nonlinear stiffness, hysteresis: `Effect.compare`): the "
+        "motor angle's residual averaged over bins of the measured torque and its direction, "
+        "simulated in one run (`hdgym.discrepancy.spring`); the noise averages out there and "
+        "the bend a refitted linear stiffness leaves stays. An effect found there is reported "
+        "on the curve; a curve left above its noise with such an effect missing and "
+        "explaining part of it is *unexplained*.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "
         "from the measured state, event by event; the ringing at each stop no longer decides "

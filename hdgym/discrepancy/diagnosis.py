@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from hdgym.params import JointParams
 
 from .fitting import FitResult
+from .friction_events import summary
 from .problem import Problem
 
 #: validation-NMSE cut (fraction) with which a generated case counts as passed / hit, when
@@ -65,10 +66,23 @@ class Diagnosis:
     untestable_why: dict[str, str] = field(default_factory=dict)
     """Effect -> what the record would have to show for it to be seen."""
     next_experiments: list[str] = field(default_factory=list)
+    compare: str = "time"
+    """What before and after are NMSE of: ``time`` (the channels) or ``spring`` (the spring
+    curve of a locked output, where the effect was found; :mod:`.spring`)."""
+    unexplained_channels: dict[str, str] = field(default_factory=dict)
+    """Channels whose own residual is neither noise nor fit slack (channel -> why;
+    :func:`.floor.unexplained_channels`)."""
     """``hdgym experiment ...`` commands whose records would decide what this one cannot."""
-    friction_features: dict | None = None
-    """Friction features of the judged record, the base fit and the final model, and their
-    mismatch (:func:`.friction_events.summary`; None on locked or inverse records)."""
+
+    @property
+    def friction_features(self) -> dict | None:
+        """Friction features of the judged record (the validation record when there is one),
+        the base fit and the final model, and their mismatch
+        (:func:`.friction_events.summary`; None on locked or inverse records)."""
+        judged = self.validation or self.problem
+        if judged is None:
+            return None
+        return summary(judged, self.before.params, self.after.params)
 
     @property
     def missing_effects(self) -> list[str]:

@@ -51,6 +51,9 @@ class Scales:
         torque_share: largest transmitted torque over the drive's peak torque (torque
             constant x ratio x the model's current limit, or the largest command).
         moving_torque_share: the same, 90th percentile over the moving samples.
+        spring: the comparison is the spring curve of a locked output (:mod:`.spring`:
+            residuals averaged over bins of the measured torque), where the noise averages
+            out and a bend shows at any torque.
 
     The defaults of the record facts (``moving`` on) say "the record shows everything".
     """
@@ -76,6 +79,7 @@ class Scales:
     te_measured: bool = True
     torque_share: float = 1.0
     moving_torque_share: float = 1.0
+    spring: bool = False
 
 
 @dataclass(frozen=True)
@@ -97,7 +101,8 @@ TE = Condition("a transmission error above the output encoder's resolution",
 TORSION = Condition("the torsion (a locked output, a torque sensor or the transmission error)",
                     lambda s: s.torsion_measured)
 HIGH_TORQUE = Condition("torque beyond half the drive's peak torque (a hardening spring shows "
-                        "at high torsion)", lambda s: s.torque_share >= 0.5)
+                        "at high torsion) or, on a locked output, the spring curve compared",
+                        lambda s: s.torque_share >= 0.5 or s.spring)
 REVERSALS = Condition("reversals (the motion changes direction at least twice)",
                       lambda s: s.reversals >= 2)
 STANDSTILL = Condition("standstill and breakaway (the joint stops for 30 ms or more and starts "
@@ -135,6 +140,10 @@ class Effect:
         channels: the comparison channels that show it.
         protocol: the identification protocol (``hdgym experiment NAME``) whose record
             reveals it: the next experiment when this record cannot.
+        compare: the comparisons that reveal it: ``"time"`` (the channels sample by
+            sample) and, for the spring's effects, ``"spring"`` (on a locked output, the
+            residuals averaged over bins of the measured torque and its direction: the
+            spring curve, :mod:`.spring`).
         sized: ``sized(scales)`` -> whether :meth:`switch_on` reads its size
             parameters (those with lower bound 0) from the record; the trial start
             then searches near them instead of over their whole range.
@@ -150,6 +159,7 @@ class Effect:
     seen: tuple[Condition, ...] = ()
     channels: str = ""
     protocol: str = ""
+    compare: tuple[str, ...] = ("time",)
     sized: Callable[[Scales], bool] = field(default=lambda s: False, repr=False)
 
     def why_not(self, s: Scales) -> str | None:

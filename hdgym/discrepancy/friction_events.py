@@ -505,3 +505,16 @@ def accepts(problem, before: JointParams, after: JointParams, cand: dict) -> str
         return (f"and the friction-feature mismatch only by {100 * j['cut']:.0f} % (needs "
                 f"{100 * FEATURE_GAIN:.0f} %)")
     return ""
+
+
+def short_of(problem, before: JointParams, after: JointParams, cand: dict, cut: float,
+             gain: float) -> str:
+    """Why an effect found where the time-domain NMSE drifts falls short ('' when it
+    passes): it must cut the mean validation NMSE by ``gain`` (``cut``: what it did; no
+    ``gain``: nothing asked), or, a friction effect, pass on its features
+    (:func:`accepts`)."""
+    if not gain or cut >= gain:
+        return ""
+    why = accepts(problem, before, after, cand)
+    return (f"{cand['name']} cuts the mean validation NMSE by {100 * cut:.0f} % (needs "
+            f"{100 * gain:.0f} % here) {why}") if why else ""

@@ -22,7 +22,7 @@ channels of NMSE/100; the NMSE reported is the mean over channels.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -32,6 +32,7 @@ from hdgym.record import Record
 from hdgym.sim import SimulationError, Simulator
 
 from . import residuals as R
+from . import spring as S
 from .effect import Scales
 from .inverse import InverseComparison
 from .record_scales import RecordScales
@@ -155,6 +156,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
                        for k, v in self.measured.items()}
         self.noise = R.noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
                                   {k: self._m(v) for k, v in self.measured.items()})
+        self.noise_time = self.noise
         self.context = self._context()
         self.scales = self._scales()
 
@@ -162,6 +164,33 @@ class Problem(Restarts, InverseComparison, RecordScales):
 
     def _m(self, x: np.ndarray) -> np.ndarray:
         return x if self.mask is None else x[self.mask]
+
+    compare: str = field(init=False, default="time")
+    """``"time"``: the channels sample by sample; ``"spring"``: the motor angle's residual
+    averaged over bins of the measured torque and its direction, simulated in one run
+    (:mod:`.spring`, locked output; :meth:`set_compare`)."""
+
+    def set_compare(self, compare: str) -> None:
+        """Compare sample by sample (``"time"``) or on the spring curve (``"spring"``)."""
+        if compare not in ("time", "spring"):
+            raise ValueError(f"compare must be time or spring, got {compare!r}")
+        if compare == self.compare:
+            return
+        self.compare = compare
+        self.scales = replace(self.scales, spring=compare == "spring")
+        if compare == "time":
+            self.noise = self.noise_time
+            self.names, self.segment = self._time_view
+            return
+        # the curve is the motor angle (ratio x torsion) against the torque, over one run:
+        # a locked joint cannot drift, and restarts would put their own errors into it
+        self._time_view = (self.names, self.segment)
+        self.names = tuple(k for k in self.names if k == "motor_angle")
+        self.segment = 0.0
+        c = self.masked_context()
+        self.spring_bins = S.spring_bins(c.torque, self.dt, self.cutoff)
+        self.noise = S.spring_noise({k: self.noise_time[k] for k in self.names},
+                                    self.spring_bins, self.dt, self.cutoff)
 
     stick_slip: bool = field(init=False, default=False)
     """Whether the joint stops and sticks in the record (restarts at rest; see
@@ -270,7 +299,10 @@ class Problem(Restarts, InverseComparison, RecordScales):
     def residuals(self, p: JointParams) -> dict[str, np.ndarray]:
         """Model minus measurement, per channel (masked samples dropped in inverse mode)."""
         pred = self.predict(p)
-        return {k: self._m(pred[k] - self.measured[k]) for k in self.names}
+        res = {k: self._m(pred[k] - self.measured[k]) for k in self.names}
+        if self.compare == "spring":
+            res = {k: S.project(r, self.spring_bins) for k, r in res.items()}
+        return res
 
     def nmse(self, p: JointParams) -> dict[str, float]:
         """NMSE% per channel and ``"mean"`` over channels (inf if the run diverged)."""

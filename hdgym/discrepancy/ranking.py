@@ -122,9 +122,12 @@ def rank_candidates(problem: Problem, current: JointParams,
     base_cols = _columns(problem, current, base_fps, r0)
     base_frac = (R._lstsq_explained(-r0, np.column_stack([c for *_, c in base_cols]))[0]
                  if base_cols else 0.0)
+    drifting = newton  # (the loop below reuses the name)
     out = []
     for name, eff in REGISTRY.items():
         if name in current.effects or not eff.testable(problem.scales):
+            continue
+        if problem.compare not in eff.compare:  # (the spring curve shows only the spring)
             continue
         if any(req not in current.effects for req in eff.requires):
             continue
@@ -160,6 +163,8 @@ def rank_candidates(problem: Problem, current: JointParams,
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
                     "size_nmse": size, "_newton": newton, **feat})
     out.sort(key=lambda c: -c["score"])
+    if drifting:  # the escalated horizons: friction is also ranked by its features
+        FE.rank_by_features(out)
     return out
 
 

@@ -92,6 +92,8 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
         "noise_nmse": _nm(diag.noise),
         "next_experiments": list(diag.next_experiments),
         "friction_features": diag.friction_features,
+        "unexplained_channels": dict(diag.unexplained_channels),
+        "compare": diag.compare,
         "conclusion": diag.conclusion,
         "notes": list(notes or []),
         "seconds": _r(diag.seconds, 3),
@@ -239,6 +241,8 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
                                        if js["validation_record"] else "") + ".",
         f"Comparison: {js['mode']} mode"
         + (f" (prediction horizon {js['horizon_s']:g} s)" if js.get("horizon_s") else "")
+        + (" on the spring curve (motor angle over bins of the measured torque and its "
+           "direction, one run)" if js.get("compare") == "spring" else "")
         + f", channels {', '.join(js['channels'])}; base model "
         f"effects: {', '.join(js['base_effects']) or 'none'}.",
         "",

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from dataclasses import replace
 
 import numpy as np
 
@@ -45,11 +46,13 @@ from . import friction_events as FE
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
-from .outcome import NOISE_FACTOR, outcome_of
+from .floor import unexplained_channels
+from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
+from .spring_search import search_spring
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -91,12 +94,8 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
         starts = [q, q2]
     else:
         starts = [min((q, q2), key=lambda s: problem.nmse(s)["mean"])]
-    q3 = cand.get("_newton")  # order lines: also from a Gauss-Newton step (_newton_start)
-    if q3 is not None:
-        starts.append(q3)
-    qf = cand.get("_feature_trial")  # drifting: friction sized on its phase-free features
-    if qf is not None:
-        starts.append(qf)
+    # order lines: also from a Gauss-Newton step; drifting friction: from its feature fit
+    starts += [s for s in (cand.get("_newton"), cand.get("_feature_trial")) if s is not None]
     fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev)
             for s in starts]
     res = min(fits, key=lambda f: f.cost)
@@ -153,8 +152,6 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     """
     params = given
     candidates = rank_candidates(problem, current.params, params, newton)
-    if mean_gain:  # a drifting comparison: friction is also ranked by its features
-        FE.rank_by_features(candidates)
     if not candidates:
         return None, "every testable effect is already in the model", candidates
     trials = []
@@ -182,10 +179,13 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
         gain = current.nmse["mean"] - res.nmse["mean"]
-        if rel < threshold or gain < MIN_GAIN:
+        # on the spring curve the noise of a bin mean, not a fixed share, is the least gain
+        min_gain = (MIN_GAIN if problem.compare == "time"
+                    else NOISE_FACTOR * problem.noise["mean"])
+        if rel < threshold or gain < min_gain:
             reasons.append(f"{best['name']} would cut the cost by {100 * rel:.1f} % "
                            f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
-                           f"{gain:.3g} points (threshold {MIN_GAIN:g})")
+                           f"{gain:.3g} points (threshold {min_gain:.3g})")
             continue
         polished = fit(problem, res.params,
                        model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
@@ -210,15 +210,10 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                                f"{1 - VALIDATION_GAIN:.2f})")
                 continue
             cut = 1.0 - v_new["mean"] / v_now["mean"] if v_now["mean"] > 0 else 0.0
-            if mean_gain and not cut >= mean_gain:
-                # a drifting comparison: a friction effect may show on its phase-free
-                # features instead (friction_events.judge)
-                why = FE.accepts(vprob, current.params, polished.params, best)
-                if why:
-                    reasons.append(f"{best['name']} cuts the mean validation NMSE by "
-                                   f"{100 * cut:.0f} % (needs {100 * mean_gain:.0f} % here) "
-                                   f"{why}")
-                    continue
+            why = FE.short_of(vprob, current.params, polished.params, best, cut, mean_gain)
+            if why:  # short of the escalated cut (friction may pass on its features)
+                reasons.append(why)
+                continue
         accepted = (best, polished, rel)
         break
     if accepted is None:
@@ -244,10 +239,7 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
       choice fall on a long one, on which even the right model drifts (a resonant record):
       the shortest horizon is searched too.
 
-    Order-line candidates there also start from a Gauss-Newton step (:func:`_newton_start`);
-    friction candidates are also ranked by their phase-free features, start from their
-    feature fit, and may pass on their features instead of the NMSE cut
-    (:func:`.friction_events.rank_by_features`, :func:`.friction_events.accepts`).
+    Order-line candidates there also start from a Gauss-Newton step (:func:`_newton_start`).
     An effect found at another horizon must cut the validation NMSE by
     :data:`ESCALATED_GAIN` (a small gain on a drifting comparison is what any extra
     parameter buys), and the diagnosis then stays at
@@ -364,6 +356,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     chosen = problem.segment
     prog.update(1)
     steps: list[Step] = []
+    spring_stuck: dict[str, str] = {}
     conclusion = ""
     candidates: list[dict] = []
     for _ in range(max_steps):
@@ -388,6 +381,17 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                               nfev_trial, nfev_polish)
             if found is not None:
                 accepted, candidates, current = found
+                escalated = True
+        if (accepted is None and auto and not problem.inverse and not steps
+                and problem.locked and problem.compare == "time"):  # then the spring curve
+            found_s, cands_s, on_curve, spring_stuck = search_spring(
+                problem, vprob, current, params, nfev_trial, MIN_SCORE, lambda cur: _search(
+                    problem, vprob, cur, params, base_paths, threshold, nfev_trial,
+                    nfev_polish, ESCALATED_GAIN))
+            untestable_why = {n: w for n, w in untestable_why.items()  # compared on the curve
+                              if not REGISTRY[n].testable(replace(problem.scales, spring=True))}
+            if found_s is not None:
+                accepted, candidates, current, before = found_s, cands_s, on_curve, on_curve
                 escalated = True
         if accepted is None:
             conclusion = reason
@@ -435,14 +439,22 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                                       conclusion)
         before = current
     prog.close()
-    if before.nmse is not None and problem.segment != chosen:  # escalated: report on it
+    if (before.nmse is not None and problem.segment != chosen
+            and problem.compare == "time"):  # escalated: report on it
         nm = problem.nmse(before.params)
         before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
     judged = vprob or problem
-    final = judged.nmse(current.params)["mean"]
+    final_channels = judged.nmse(current.params)
+    final = final_channels["mean"]
+    stuck: dict[str, str] = dict(spring_stuck)
+    if at_noise_level(final, judged.noise["mean"]):
+        # the mean can hide one channel that alone shows what the model lacks
+        stuck |= unexplained_channels(judged, current.params,
+                                     model_params(current.params, judged.scales, params),
+                                     final_channels, NOISE_FACTOR)
     for c in candidates:  # effects the record's noise would hide at the size it suggests
         if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
             untestable_why[c["name"]] = (
@@ -451,7 +463,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, params)
+                                untestable_why, params, stuck)
+    if stuck:
+        conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
@@ -462,7 +476,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
-        friction_features=FE.summary(judged, before.params, current.params),
+        unexplained_channels=stuck, compare=problem.compare,
         horizon=None if problem.inverse else problem.segment,
         noise=judged.noise, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
