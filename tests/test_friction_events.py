@@ -1,4 +1,4 @@
-"""Friction trial starts per side, and friction event features (friction_events)."""
+"""Friction trial starts per side, and friction event features (friction_events, friction_fit)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from hdgym.discrepancy import friction_events as FE
+from hdgym.discrepancy import friction_fit as FF
 from hdgym.discrepancy.paths import get_value
 from hdgym.discrepancy.problem import Problem
 from hdgym.discrepancy.registry import REGISTRY
@@ -71,11 +72,11 @@ def test_features_judge_and_report_a_friction_effect():
 
     truth, rec, base = _wave_drive()
     prob = Problem(rec, base)
-    assert FE.accepts(prob, base, truth, {"name": "viscous_friction"}) == ""
-    assert "agree already" in FE.accepts(prob, truth, truth, {"name": "viscous_friction"})
-    assert "not a friction" in FE.accepts(prob, base, truth, {"name": "hysteresis"})
+    assert FF.accepts(prob, base, truth, {"name": "viscous_friction"}) == ""
+    assert "agree already" in FF.accepts(prob, truth, truth, {"name": "viscous_friction"})
+    assert "not a friction" in FF.accepts(prob, base, truth, {"name": "hysteresis"})
     cand = {"name": "coulomb_friction"}
-    assert "only by" in FE.accepts(prob, base, base.set("friction.input.coulomb", 0.0011), cand)
+    assert "only by" in FF.accepts(prob, base, base.set("friction.input.coulomb", 0.0011), cand)
     assert cand["feature_judgement"]["cut"] < 0.8
     js = FE.summary(prob, base, truth)
     assert js["mismatch_after"]["total"] < 0.1 * js["mismatch_before"]["total"]
@@ -113,7 +114,7 @@ def test_drifting_comparison_ranks_friction_by_its_features():
               "features": {"before": 0.01}, "_feature_start": q},
              {"name": "viscous_friction", "score": 0.05, "feature_explained": 0.6,
               "features": {"before": 0.3}, "_feature_start": q}]
-    FE.rank_by_features(cands)
+    FF.rank_by_features(cands)
     assert [c["name"] for c in cands] == ["viscous_friction", "kinematic_error", "stiction"]
     assert cands[0]["score"] == 0.6 and cands[0]["_feature_trial"] is q
     assert cands[2]["score"] == 0.01

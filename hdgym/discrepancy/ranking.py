@@ -17,7 +17,7 @@ from scipy.optimize import minimize_scalar
 from hdgym.params import JointParams
 from hdgym.sim import SimulationError
 
-from . import friction_events as FE
+from . import friction_fit as FF
 from . import residuals as R
 from .paths import get_value, set_values
 from .problem import Problem
@@ -151,7 +151,7 @@ def rank_candidates(problem: Problem, current: JointParams,
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
             # friction: what the phase-free features say (a feature fit of its own parameters)
-            feat = FE.candidate_entry(problem, current, q, own_fps, name)
+            feat = FF.candidate_entry(problem, current, q, own_fps, name)
             if newton and any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
                 # order lines: the size grid of _start cannot size them (they start at zero)
                 newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
@@ -164,7 +164,7 @@ def rank_candidates(problem: Problem, current: JointParams,
                     "size_nmse": size, "_newton": newton, **feat})
     out.sort(key=lambda c: -c["score"])
     if drifting:  # the escalated horizons: friction is also ranked by its features
-        FE.rank_by_features(out)
+        FF.rank_by_features(out)
     return out
 
 

@@ -42,7 +42,7 @@ from hdgym.params import JointParams
 from hdgym.progress import bar
 from hdgym.record import Record
 
-from . import friction_events as FE
+from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit
@@ -210,7 +210,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                                f"{1 - VALIDATION_GAIN:.2f})")
                 continue
             cut = 1.0 - v_new["mean"] / v_now["mean"] if v_now["mean"] > 0 else 0.0
-            why = FE.short_of(vprob, current.params, polished.params, best, cut, mean_gain)
+            why = FF.short_of(vprob, current.params, polished.params, best, cut, mean_gain)
             if why:  # short of the escalated cut (friction may pass on its features)
                 reasons.append(why)
                 continue
