@@ -340,6 +340,33 @@ def test_effects_say_where_they_can_be_seen():
         assert e.seen and e.protocol in experiments.PROTOCOLS and e.channels
 
 
+def test_kinematic_error_shows_on_a_part_turn_crossed_back_and_forth():
+    """Kinematic error is a function of the WG angle: a record that crosses a part of a
+    turn back and forth shows it (the transmission error repeats at the same angles); one
+    pass over a part of a turn does not (a drift in time looks the same)."""
+    import dataclasses
+
+    ke = REGISTRY["kinematic_error"]
+    sine = dataclasses.replace(SCALES, wg_turns=0.4, reversals=23)
+    assert ke.why_not(sine) is None
+    assert "two WG revolutions" in ke.why_not(dataclasses.replace(sine, reversals=0))
+    assert "two WG revolutions" in ke.why_not(dataclasses.replace(sine, wg_turns=0.1))
+    # the friction ripple still needs whole turns (its lines flip with the direction)
+    assert "two WG revolutions" in REGISTRY["position_dependent_friction"].why_not(sine)
+    # a base model's lines are kept there (they would absorb other effects), an added
+    # kinematic error is fitted
+    with_ke = ke.switch_on(cases.case_joint(), SCALES)
+    plain = cases.case_joint()
+
+    def ke_paths(p, anchor, s):
+        return [fp.path for fp in model_params(p, s, anchor)
+                if fp.path.startswith("kinematic_error.")]
+
+    assert ke_paths(with_ke, with_ke, sine) == []
+    assert ke_paths(with_ke, plain, sine) != []
+    assert ke_paths(with_ke, with_ke, dataclasses.replace(sine, wg_turns=3.0)) != []
+
+
 def test_three_outcomes_and_the_next_experiment():
     from hdgym.discrepancy.outcome import RESOLVED
     from hdgym.discrepancy.outcome import outcome_of as _outcome

@@ -96,6 +96,13 @@ SIMULATED = Condition("a current command to re-simulate (this is a closed-loop r
 MOVING = Condition("motion (the joint moves in at least 20 % of the record)",
                    lambda s: s.moving >= 0.2)
 TURNS = Condition("at least two WG revolutions of motion", lambda s: s.wg_turns >= 2.0)
+REVISIT_TURNS = 0.25
+"""Least WG revolutions a record that crosses its angle range back and forth must span for a
+kinematic error to show (half a period of its dominant order-2 line)."""
+TURNS_OR_REVISITS = Condition(
+    "at least two WG revolutions of motion, or a quarter revolution crossed back and forth "
+    "(two reversals or more: the transmission error repeats at the same WG angles)",
+    lambda s: s.wg_turns >= 2.0 or (s.wg_turns >= REVISIT_TURNS and s.reversals >= 2))
 TE = Condition("a transmission error above the output encoder's resolution",
                lambda s: s.te_measured)
 TORSION = Condition("the torsion (a locked output, a torque sensor or the transmission error)",
@@ -140,6 +147,11 @@ class Effect:
         channels: the comparison channels that show it.
         protocol: the identification protocol (``hdgym experiment NAME``) whose record
             reveals it: the next experiment when this record cannot.
+        refit: further conditions under which the parameters of this effect, when the
+            given base model already has it, are refitted (otherwise they keep their given
+            values): where the record shows the effect but cannot tell its parameters from
+            those of other effects, it may be added (an addition must pass the checks of
+            :func:`.workflow.diagnose`) but a base model's values are not moved.
         compare: the comparisons that reveal it: ``"time"`` (the channels sample by
             sample) and, for the spring's effects, ``"spring"`` (on a locked output, the
             residuals averaged over bins of the measured torque and its direction: the
@@ -161,6 +173,7 @@ class Effect:
     protocol: str = ""
     compare: tuple[str, ...] = ("time",)
     sized: Callable[[Scales], bool] = field(default=lambda s: False, repr=False)
+    refit: tuple[Condition, ...] = ()
 
     def why_not(self, s: Scales) -> str | None:
         """Why a record with scales ``s`` cannot reveal this effect (None: it can)."""

@@ -19,6 +19,7 @@ from .effect import (
     TE,
     TORSION,
     TURNS,
+    TURNS_OR_REVISITS,
     Effect,
     FitParam,
 )
@@ -158,7 +159,10 @@ def _amp_neutral(d):
 GEAR_EFFECTS: tuple[Effect, ...] = (
     Effect("kinematic_error", "order_lines_te",
            "kinematic error: output lags/leads motor/ratio periodically in the WG angle",
-           _ke_params, _ke_on, _ke_neutral, seen=(FREE, SIMULATED, TE, MOVING, TURNS),
+           _ke_params, _ke_on, _ke_neutral, seen=(FREE, SIMULATED, TE, MOVING, TURNS_OR_REVISITS),
+           # over a part turn its lines alias into each other and into any smooth function
+           # of the angle (in a back-and-forth motion, of time): a given model's are kept
+           refit=(TURNS,),
            channels="transmission_error against the WG angle", protocol="slow_constant_speed"),
     Effect("nonlinear_stiffness", "cubic_torsion",
            "hardening flexspline spring: residual cubic in the torsion",

@@ -78,6 +78,8 @@ def model_params(p: JointParams, s: Scales, anchor: JointParams | None = None
         if not eff.testable(s):
             continue
         anchored = anchor is not None and name in anchor.effects
+        if anchored and not all(c.check(s) for c in eff.refit):
+            continue  # the record shows it but cannot pin the base model's values down
         for fp in eff.fit_params(p, s):
             if fp.path in seen:
                 continue
