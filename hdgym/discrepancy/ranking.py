@@ -122,7 +122,6 @@ def rank_candidates(problem: Problem, current: JointParams,
     base_cols = _columns(problem, current, base_fps, r0)
     base_frac = (R._lstsq_explained(-r0, np.column_stack([c for *_, c in base_cols]))[0]
                  if base_cols else 0.0)
-    drifting = newton  # (the loop below reuses the name)
     out = []
     for name, eff in REGISTRY.items():
         if name in current.effects or not eff.testable(problem.scales):
@@ -134,7 +133,7 @@ def rank_candidates(problem: Problem, current: JointParams,
         sig = R.signature(eff.signature, res, w, ctx)
         sens = 0.0
         size = math.nan
-        newton = None
+        nstart = None
         feat: dict = {}
         try:  # how much the effect, at the size the record suggests, changes the channels
             d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
@@ -154,16 +153,16 @@ def rank_candidates(problem: Problem, current: JointParams,
             feat = FF.candidate_entry(problem, current, q, own_fps, name)
             if newton and any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
                 # order lines: the size grid of _start cannot size them (they start at zero)
-                newton = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
+                nstart = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
         except (SimulationError, ValueError):
             pass
         out.append({"name": name, "signature": eff.signature,
                     "signature_explained": round(sig["explained"], 4),
                     "sensitivity_explained": round(sens, 4),
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
-                    "size_nmse": size, "_newton": newton, **feat})
+                    "size_nmse": size, "_newton": nstart, **feat})
     out.sort(key=lambda c: -c["score"])
-    if drifting:  # the escalated horizons: friction is also ranked by its features
+    if newton:  # the escalated horizons: friction is also ranked by its features
         FF.rank_by_features(out)
     return out
 
