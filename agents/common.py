@@ -209,11 +209,16 @@ def make_vec_env(cfg: Mapping[str, Any], n_envs: int, seed: int,
     return venv
 
 
+def _add_member(zip_path: str | Path, member: str, text: str) -> None:
+    """Add ``member`` to a saved SB3 policy zip unless it already holds one."""
+    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
+        if member not in zf.namelist():
+            zf.writestr(member, text)
+
+
 def embed_config(zip_path: str | Path, cfg: Mapping[str, Any]) -> None:
     """Store the resolved config inside a saved SB3 policy zip."""
-    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
-        if CONFIG_MEMBER not in zf.namelist():
-            zf.writestr(CONFIG_MEMBER, json.dumps(cfg, indent=1, default=str))
+    _add_member(zip_path, CONFIG_MEMBER, json.dumps(cfg, indent=1, default=str))
 
 
 def policy_config(zip_path: str | Path) -> dict[str, Any] | None:
@@ -284,9 +289,7 @@ def save_pipeline(zip_path: str | Path, venv: Any, cfg: Mapping[str, Any]) -> No
             v = v.venv
         spec.update(obs_mean=v.obs_rms.mean.tolist(), obs_var=v.obs_rms.var.tolist(),
                     clip=float(v.clip_obs), epsilon=float(v.epsilon))
-    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
-        if PIPELINE_MEMBER not in zf.namelist():
-            zf.writestr(PIPELINE_MEMBER, json.dumps(spec))
+    _add_member(zip_path, PIPELINE_MEMBER, json.dumps(spec))
 
 
 class ObsPipeline:

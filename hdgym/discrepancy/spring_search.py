@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from hdgym.params import JointParams
 
-from .fitting import FitResult, fit
+from .fitting import FitResult, fit, rescored
 from .floor import curve_unexplained
 from .outcome import NOISE_FACTOR
 from .problem import Problem
@@ -45,8 +45,7 @@ def search_spring(problem: Problem, vprob: Problem | None, current: FitResult,
     probs = [problem] + ([vprob] if vprob is not None else [])
     for pr in probs:
         pr.set_compare("spring")
-    nm = problem.nmse(current.params)
-    cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+    cur = rescored(problem, current)
     refit = fit(problem, cur.params, model_params(cur.params, problem.scales, given),
                 max_nfev=nfev)
     if refit.cost < cur.cost:

@@ -45,7 +45,7 @@ from hdgym.record import Record
 from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
-from .fitting import FitResult, fit
+from .fitting import FitResult, fit, rescored
 from .floor import unexplained_channels
 from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
 from .paths import get_value, set_values
@@ -259,8 +259,7 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
         problem.segment = h
         if vprob is not None:
             vprob.segment = h
-        nm = problem.nmse(current.params)
-        cur = FitResult(current.params, current.values, nm, current.nfev, nm["mean"] / 100)
+        cur = rescored(problem, current)
         accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
                                           nfev_trial, nfev_polish, ESCALATED_GAIN, True)
         if accepted is not None:
@@ -269,6 +268,14 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
     if vprob is not None:
         vprob.segment = h0
     return None
+
+
+def _choose_horizon(problem: Problem, vprob: Problem | None, p: JointParams,
+                    horizons: tuple[float, ...] = HORIZONS) -> None:
+    """Choose the training problem's horizon with ``p``; the validation problem follows."""
+    problem.choose_horizon(p, horizons)
+    if vprob is not None:
+        vprob.segment = problem.segment
 
 
 def _settle(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
@@ -291,11 +298,8 @@ def _settle(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     if not refit.cost < current.cost:
         return current, conclusion
     if auto and not problem.inverse:
-        problem.choose_horizon(refit.params)
-        if vprob is not None:
-            vprob.segment = problem.segment
-        nm = problem.nmse(refit.params)
-        refit = FitResult(refit.params, refit.values, nm, refit.nfev, nm["mean"] / 100)
+        _choose_horizon(problem, vprob, refit.params)
+        refit = rescored(problem, refit)
     return refit, (conclusion + f"; the base model refitted (coarse and fine difference steps):"
                    f" NMSE {current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
 
@@ -347,11 +351,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     if auto and not problem.inverse:
         # the horizon: chosen with the fitted base model (a given model that is some per
         # cent off drifts on any long horizon; the fitted one only where the record does)
-        problem.choose_horizon(before.params)
-        if vprob is not None:
-            vprob.segment = problem.segment
-        nm = problem.nmse(before.params)
-        before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
+        _choose_horizon(problem, vprob, before.params)
+        before = rescored(problem, before)
     current = before
     chosen = problem.segment
     prog.update(1)
@@ -424,13 +425,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
             # (only shorter: a longer one is taken only where an effect removes the drift,
             # see _escalate; not right after that, the horizon was chosen where it shows)
             h_prev = problem.segment
-            problem.choose_horizon(current.params, tuple(h for h in HORIZONS if h <= h_prev))
-            if vprob is not None:
-                vprob.segment = problem.segment
+            _choose_horizon(problem, vprob, current.params,
+                            tuple(h for h in HORIZONS if h <= h_prev))
             if problem.segment != h_prev:
-                nm = problem.nmse(current.params)
-                current = FitResult(current.params, current.values, nm, current.nfev,
-                                    nm["mean"] / 100)
+                current = rescored(problem, current)
         prog.update(1)
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
@@ -441,8 +439,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     prog.close()
     if (before.nmse is not None and problem.segment != chosen
             and problem.compare == "time"):  # escalated: report on it
-        nm = problem.nmse(before.params)
-        before = FitResult(before.params, before.values, nm, before.nfev, nm["mean"] / 100)
+        before = rescored(problem, before)
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
