@@ -387,6 +387,12 @@ def test_three_outcomes_and_the_next_experiment():
     out, nxt = _outcome(["step"], 10.0, 0.001, cands, {}, base)
     assert out == "named; rest unexplained"
     assert nxt == ["hdgym experiment breakaway_ramps", "hdgym experiment current_sine"]
+    # with the final model's own floor known, "named" needs the residual at that floor, not
+    # below the absolute RESOLVED level (the rest there is what the named model still lacks)
+    assert _outcome(["step"], 0.15, 0.001, cands, {}, base, None, 0.1)[0] == "named"
+    assert _outcome(["step"], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == (
+        "named; rest unexplained")
+    assert _outcome([], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == "nothing missing"
 
 
 @pytest.mark.slow
