@@ -6,7 +6,10 @@ vectorization_mode="vector_entry_point")`` returns a
 (randomized per episode when ``randomize`` is given). The physics runs in
 SIMD lanes (:mod:`hdgym.physics.lanes`); batches of
 ``lanes.PARALLEL_THRESHOLD`` envs and more spread over all cores. The
-results are the same either way.
+results are the same either way. A step is one compiled call
+(:mod:`hdgym.envs.fused`) that writes fresh output arrays; the single env
+steps through the composed :meth:`JointBatch.advance`, with the same
+numbers.
 
 Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
 be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
