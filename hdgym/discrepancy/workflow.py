@@ -187,9 +187,11 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                            f"(threshold {100 * threshold:.0f} %) and the mean NMSE by "
                            f"{gain:.3g} points (threshold {min_gain:.3g})")
             continue
+        # on the spring curve the one channel is the quantized motor angle: its bin means are
+        # a staircase in the parameters, so the polish also differences the coarse step
         polished = fit(problem, res.params,
                        model_params(res.params, problem.scales, params), max_nfev=nfev_polish,
-                       search=True)
+                       search=True, coarse=problem.compare == "spring")
         if polished.cost > res.cost:
             polished = res
         if vprob is not None:

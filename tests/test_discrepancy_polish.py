@@ -1,0 +1,44 @@
+"""The polish of an effect found on the spring curve also differences the coarse step."""
+
+from __future__ import annotations
+
+import pytest
+
+from hdgym.discrepancy import workflow as W
+from hdgym.discrepancy.fitting import FitResult
+from hdgym.params import preset
+
+
+class _Problem:
+    names = ("motor_angle",)
+    noise = {"motor_angle": 1e-4, "mean": 1e-4}
+    scales = None
+
+    def __init__(self, compare: str) -> None:
+        self.compare = compare
+
+
+@pytest.mark.parametrize("compare", ["spring", "time"])
+def test_spring_curve_polish_uses_the_coarse_step(monkeypatch, compare):
+    """On the spring curve the one channel is the quantized motor angle (a staircase in the
+    parameters): the polish of an accepted candidate runs the coarse difference step too;
+    on the time channels it does not (there the fine step alone fitted the tuned cases
+    better)."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+    trial = FitResult(p, {}, {"mean": 0.1}, 0, 0.1)
+    cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.9}
+    calls = []
+    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
+    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
+
+    def fit(problem, q, fps, **kw):
+        calls.append(kw)
+        return trial
+
+    monkeypatch.setattr(W, "fit", fit)
+    accepted, _, _ = W._search(_Problem(compare), None, current, p, [], 0.4, 10, 20)
+    assert accepted is not None
+    assert calls and calls[-1]["search"] is True
+    assert calls[-1]["coarse"] is (compare == "spring")
