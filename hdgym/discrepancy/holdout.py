@@ -277,8 +277,8 @@ def table(results: list[Result]) -> str:
         size = (f"{r.size:.2g} ({r.noise:.2g})" + ("" if r.present or r.case.hidden is None
                                                     else ": not present"))
         found = ", ".join(d.missing_effects) or "none"
-        if d.compare == "spring":  # before and after are NMSE of the spring curve
-            found += " (spring curve)"
+        if d.compare in ("spring", "lines"):  # before and after are NMSE of that view
+            found += " (spring curve)" if d.compare == "spring" else " (line channels)"
         lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
                      f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {100 * d.nmse_cut:.0f} % | "
                      f"{'yes' if r.hit else '**no**'} | {'yes' if r.honest else '**no**'} | "
