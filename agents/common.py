@@ -40,6 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 import hdgym  # noqa: F401  (registers the env ids)
+from hdgym.files import atomic_path
 
 CONFIG_MEMBER = "agents_config.json"
 #: the observation pipeline's numbers (history, normalization statistics) in a policy zip
@@ -210,9 +211,18 @@ def make_vec_env(cfg: Mapping[str, Any], n_envs: int, seed: int,
 
 
 def _add_member(zip_path: str | Path, member: str, text: str) -> None:
-    """Add ``member`` to a saved SB3 policy zip unless it already holds one."""
-    with zipfile.ZipFile(zip_path, "a", compression=zipfile.ZIP_DEFLATED) as zf:
-        if member not in zf.namelist():
+    """Add ``member`` to a saved SB3 policy zip unless it already holds one.
+
+    The zip is appended to as a copy beside it, renamed over it when complete, so an
+    interrupt leaves the policy as it was, never a damaged zip.
+    """
+    with zipfile.ZipFile(zip_path) as zf:
+        if member in zf.namelist():
+            return
+    data = Path(zip_path).read_bytes()
+    with atomic_path(zip_path) as tmp:
+        tmp.write_bytes(data)
+        with zipfile.ZipFile(tmp, "a", compression=zipfile.ZIP_DEFLATED) as zf:
             zf.writestr(member, text)
 
 

@@ -41,3 +41,32 @@ def test_history_and_normalized_observations_reach_the_saved_policy(tmp_path):
         assert np.array_equal(done_w, start)
     with pytest.raises(ValueError, match="history"):
         wrap_obs(raw, {"policy": {"history": 0}})
+
+
+def test_config_is_added_to_a_policy_zip_whole_or_not_at_all(tmp_path, monkeypatch):
+    """embed_config appends through a copy renamed over the zip: interrupted while
+    writing, the zip on disk is the one it was (and still opens); run again, it gains the
+    config, once."""
+    import zipfile
+
+    from agents.common import embed_config, policy_config
+
+    path = tmp_path / "policy.zip"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("data", "weights")
+    before = path.read_bytes()
+
+    def interrupted(self, *args, **kwargs):  # the member is written, the directory is not
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(zipfile.ZipFile, "_write_end_record", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            embed_config(path, {"train": {"algo": "ppo"}})
+    assert path.read_bytes() == before and policy_config(path) is None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["policy.zip"]  # no temp file left
+    embed_config(path, {"train": {"algo": "ppo"}})
+    embed_config(path, {"train": {"algo": "sac"}})  # already there: kept
+    assert policy_config(path) == {"train": {"algo": "ppo"}}
+    with zipfile.ZipFile(path) as zf:
+        assert zf.read("data") == b"weights"

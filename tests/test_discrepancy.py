@@ -387,6 +387,12 @@ def test_three_outcomes_and_the_next_experiment():
     out, nxt = _outcome(["step"], 10.0, 0.001, cands, {}, base)
     assert out == "named; rest unexplained"
     assert nxt == ["hdgym experiment breakaway_ramps", "hdgym experiment current_sine"]
+    # with the final model's own floor known, "named" needs the residual at that floor, not
+    # below the absolute RESOLVED level (the rest there is what the named model still lacks)
+    assert _outcome(["step"], 0.15, 0.001, cands, {}, base, None, 0.1)[0] == "named"
+    assert _outcome(["step"], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == (
+        "named; rest unexplained")
+    assert _outcome([], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == "nothing missing"
 
 
 @pytest.mark.slow
@@ -627,13 +633,25 @@ def test_holdout_scoring_counts_honest_misses():
     class Stand(SimpleNamespace):  # a diagnosis's fields, with its own cut
         nmse_cut = Diagnosis.nmse_cut
 
-    def res(hidden, outcome, found, before=10.0, after=1.0, untestable=(), size=1.0):
+    def res(hidden, outcome, found, before=10.0, after=1.0, untestable=(), size=1.0,
+            truth=float("nan")):
         d = Stand(outcome=outcome, missing_effects=list(found), nmse_before=before,
                   nmse_after=after, untestable=list(untestable))
-        return holdout.Result(holdout.Blind("hduc20", hidden, "step:1"), d, 1.0, size, 0.01)
+        return holdout.Result(holdout.Blind("hduc20", hidden, "step:1"), d, 1.0, size, 0.01,
+                              truth=truth)
 
     assert res("stiction", "named", ["stiction"]).hit
     assert not res("stiction", "named", ["stiction"], after=5.0).hit  # cut < 80 %
+    # judged on the closable gap: 10 -> 5 % with the generating joint at 4.5 % closes 91 %
+    # of it, a hit that the raw cut (50 %) misses; at a 1 % truth it closes 56 %
+    floor = res("stiction", "named", ["stiction"], after=5.0, truth=4.5)
+    assert floor.hit and not floor.raw_hit and abs(floor.gap_cut - 5 / 5.5) < 1e-12
+    assert not res("stiction", "named", ["stiction"], after=5.0, truth=1.0).hit
+    # a truth not below the NMSE before leaves no gap: the raw cut decides
+    no_gap = res("stiction", "named", ["stiction"], after=5.0, truth=12.0)
+    assert math.isnan(no_gap.gap_cut) and not no_gap.hit
+    assert "judged by the raw cut: 0 of 2" in holdout.summary([floor, no_gap])
+    assert holdout.summary([floor, no_gap]).startswith("1 of 2 hit")
     miss = res("stiction", "nothing missing", [])
     assert not miss.hit and not miss.honest
     assert res("stiction", "nothing missing", [], untestable=["stiction"]).honest

@@ -40,6 +40,23 @@ def test_a_clipped_current_is_not_noise_or_slack():
         "named; rest unexplained")
 
 
+def test_a_named_model_is_judged_against_its_own_floor():
+    from hdgym.discrepancy.outcome import FLOOR_FACTOR, judge
+
+    truth, base, prob = _clipped_record()
+    # the joint the record was made with, named: at its own floor
+    out, _, stuck, floor = judge(prob, truth, model_params(truth, prob.scales, truth),
+                                 ["amplifier_saturation"], [], {}, truth, {})
+    assert out == "named" and not stuck and floor is not None
+    assert prob.nmse(truth)["mean"] <= FLOOR_FACTOR * floor
+    # a model still without the clipping, had something else been named: the rest is not
+    # at its floor (the current channel the clipping shapes)
+    out, _, _, floor = judge(prob, base, model_params(base, prob.scales, base),
+                             ["viscous_friction"], [], {}, base, {})
+    assert out == "named; rest unexplained"
+    assert prob.nmse(base)["mean"] > FLOOR_FACTOR * floor
+
+
 def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     from hdgym.discrepancy.fitting import fit
     from hdgym.discrepancy.spring_search import search_spring

@@ -63,6 +63,9 @@ class Diagnosis:
     """``nothing missing``, ``named`` or ``unexplained`` (see :mod:`.workflow`)."""
     noise: dict[str, float] | None = None
     """Measurement-noise NMSE per channel of the record the outcome is judged on."""
+    floor: float | None = None
+    """The final model's comparison floor on that record, mean NMSE percent
+    (:func:`.floor.floor_nmse`; what the outcome "named" is judged against)."""
     untestable_why: dict[str, str] = field(default_factory=dict)
     """Effect -> what the record would have to show for it to be seen."""
     next_experiments: list[str] = field(default_factory=list)

@@ -103,15 +103,17 @@ def reach_nmse(problem: Problem, p: JointParams, fps: list[FitParam]) -> dict[st
 
 
 def unexplained_channels(problem: Problem, p: JointParams, fps: list[FitParam],
-                         final: dict[str, float], factor: float) -> dict[str, str]:
+                         final: dict[str, float], factor: float,
+                         floor: dict[str, float] | None = None) -> dict[str, str]:
     """Channels whose residual is neither noise nor slack: channel -> why (words).
 
     ``final``: NMSE per channel of ``p`` on ``problem``; a channel is listed when it exceeds
     ``factor`` x its comparison floor (:func:`floor_nmse`) and the reach of the fitted
     parameters ``fps`` (:func:`reach_nmse`). The reach is computed only when some channel
-    is above its floor.
+    is above its floor. ``floor``: :func:`floor_nmse` of ``p`` when already measured.
     """
-    floor = floor_nmse(problem, p)
+    if floor is None:
+        floor = floor_nmse(problem, p)
     above = [k for k in problem.names if k in floor and final.get(k, 0.0) > factor * floor[k]]
     if not above:
         return {}

@@ -2,8 +2,15 @@
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from hdgym.params import JointParams
 
+from .effect import FitParam
+from .floor import floor_nmse, unexplained_channels
+from .problem import Problem
 from .registry import REGISTRY
 
 RESOLVED = 0.5
@@ -11,6 +18,20 @@ RESOLVED = 0.5
 what complete base models reach on the tuned nothing-hidden cases (fit slack, restarts)."""
 NOISE_FACTOR = 3.0
 """A residual within this factor of the measurement-noise NMSE is at the noise level."""
+
+
+FLOOR_FACTOR = 2.0
+"""A model with an effect named is at its floor when its final mean NMSE is within this
+factor of its own comparison floor (:func:`.floor.floor_nmse`, mean over channels): a model
+that is exactly right differs from that estimate by another noise realization and its
+restarts, well within a factor 2 (measured on generated cases, :mod:`.truth`); a residual
+beyond it is something the named model still lacks, or fit slack."""
+
+
+def at_floor(final: float, floor: float) -> bool:
+    """Whether a mean NMSE ``final`` (percent) is at the comparison floor ``floor``
+    (:data:`FLOOR_FACTOR`)."""
+    return final <= FLOOR_FACTOR * floor
 
 
 def at_noise_level(final: float, noise: float) -> bool:
@@ -21,7 +42,8 @@ def at_noise_level(final: float, noise: float) -> bool:
 
 def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
                untestable_why: dict[str, str], given: JointParams,
-               channels_unexplained: dict[str, str] | None = None) -> tuple[str, list[str]]:
+               channels_unexplained: dict[str, str] | None = None,
+               floor: float | None = None) -> tuple[str, list[str]]:
     """The honest outcome and the experiments that would decide what this record cannot.
 
     Args:
@@ -29,9 +51,12 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
         there is one); noise: its measurement-noise NMSE, percent; candidates: the last
         ranking; untestable_why: effect -> what the record lacks; given: the base model;
         channels_unexplained: channels whose own residual is neither noise nor fit slack
-        (:func:`.floor.unexplained_channels`; channel -> why).
+        (:func:`.floor.unexplained_channels`; channel -> why); floor: the final model's
+        comparison floor, mean NMSE percent (:func:`.floor.floor_nmse`; None: unknown).
 
-    *named* when an effect was added (each had to cut the gap); else *nothing missing*
+    *named* when an effect was added (each had to cut the gap) and what remains is at the
+    final model's own floor (:func:`at_floor`; without a floor, at the noise level as
+    below), else *named; rest unexplained*; with nothing added, *nothing missing*
     when the final NMSE is at the noise level (:data:`NOISE_FACTOR` x the measurement-noise
     NMSE) or resolved (:data:`RESOLVED`: fit slack and restart errors keep complete models
     above the noise) and no channel on its own is unexplained (a clipped current is a
@@ -42,7 +67,10 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
     identification protocol of every untestable effect that is not in the model, and, for an
     unexplained residual, of the two best-ranked candidates.
     """
-    resolved = at_noise_level(final, noise) and not channels_unexplained
+    if steps and floor is not None and math.isfinite(floor):
+        resolved = at_floor(final, floor) and not channels_unexplained
+    else:
+        resolved = at_noise_level(final, noise) and not channels_unexplained
     if steps:
         outcome = "named" if resolved else "named; rest unexplained"
     elif resolved:
@@ -54,3 +82,31 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
         names = [c["name"] for c in candidates[:2]] + names
     protocols = list(dict.fromkeys(REGISTRY[n].protocol for n in names if REGISTRY[n].protocol))
     return outcome, [f"hdgym experiment {p}" for p in protocols]
+
+
+def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, candidates: list[dict],
+          untestable_why: dict[str, str], given: JointParams, stuck: dict[str, str]
+          ) -> tuple[str, list[str], dict[str, str], float | None]:
+    """The outcome of a diagnosis whose final model ``p`` is judged on ``judged``.
+
+    The final model's comparison floor (:func:`.floor.floor_nmse`, mean over channels) is
+    measured; when the mean NMSE is resolved (at that floor with an effect named, at the noise
+    level without), each channel is also checked on its own
+    (:func:`.floor.unexplained_channels`, added to ``stuck``). Returns ``(outcome, next
+    experiments, unexplained channels, floor)`` (:func:`outcome_of`; floor None when it
+    cannot be measured: an inverse comparison, a diverging run).
+    """
+    final_channels = judged.nmse(p)
+    final = final_channels["mean"]
+    fl = floor_nmse(judged, p)
+    floor = float(np.mean(list(fl.values()))) if fl else None
+    stuck = dict(stuck)
+    if steps and floor is not None:
+        resolved = at_floor(final, floor)
+    else:
+        resolved = at_noise_level(final, judged.noise["mean"])
+    if resolved:  # the mean can hide one channel that alone shows what the model lacks
+        stuck |= unexplained_channels(judged, p, fps, final_channels, NOISE_FACTOR, fl)
+    outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
+                                untestable_why, given, stuck, floor)
+    return outcome, nexts, stuck, floor

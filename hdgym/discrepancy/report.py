@@ -90,6 +90,7 @@ def to_json(diag: Diagnosis, notes: list[str] | None = None) -> dict:
         "outcome": diag.outcome,
         "horizon_s": diag.horizon,
         "noise_nmse": _nm(diag.noise),
+        "floor_nmse": None if diag.floor is None else _r(diag.floor, 4),
         "next_experiments": list(diag.next_experiments),
         "friction_features": diag.friction_features,
         "unexplained_channels": dict(diag.unexplained_channels),
@@ -253,7 +254,8 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
         "",
         f"NMSE ({js['nmse_on']} record, mean over channels): {js['nmse_before']} % with the base "
         f"model fitted -> {js['nmse_after']} % after (measurement noise alone: "
-        f"{(js.get('noise_nmse') or {}).get('mean')} %). {js['conclusion']}.",
+        f"{(js.get('noise_nmse') or {}).get('mean')} %; the final model on a record it made "
+        f"itself: {js.get('floor_nmse')} %). {js['conclusion']}.",
         "",
     ]
     if js.get("fit_window_s"):

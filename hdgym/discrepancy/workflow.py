@@ -46,8 +46,7 @@ from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
-from .floor import unexplained_channels
-from .outcome import NOISE_FACTOR, at_noise_level, outcome_of
+from .outcome import NOISE_FACTOR, judge
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
@@ -445,14 +444,6 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
     judged = vprob or problem
-    final_channels = judged.nmse(current.params)
-    final = final_channels["mean"]
-    stuck: dict[str, str] = dict(spring_stuck)
-    if at_noise_level(final, judged.noise["mean"]):
-        # the mean can hide one channel that alone shows what the model lacks
-        stuck |= unexplained_channels(judged, current.params,
-                                     model_params(current.params, judged.scales, params),
-                                     final_channels, NOISE_FACTOR)
     for c in candidates:  # effects the record's noise would hide at the size it suggests
         if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
             untestable_why[c["name"]] = (
@@ -460,8 +451,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
-    outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, params, stuck)
+    outcome, nexts, stuck, floor = judge(
+        judged, current.params, model_params(current.params, judged.scales, params), steps,
+        candidates, untestable_why, params, spring_stuck)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
@@ -476,7 +468,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
         unexplained_channels=stuck, compare=problem.compare,
         horizon=None if problem.inverse else problem.segment,
-        noise=judged.noise, next_experiments=nexts,
+        noise=judged.noise, floor=floor, next_experiments=nexts,
         seconds=_time.perf_counter() - t0, problem=problem,
         validation=vprob, fit_window=None if full is None else fit_window,
         nmse_record_before=None if full is None else _full_nmse(full, params, problem,

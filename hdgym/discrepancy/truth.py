@@ -1,0 +1,83 @@
+"""What a generated case's own model leaves on its record: the floor no diagnosis can go below.
+
+A hold-out or blind case (:mod:`.holdout`) knows the joint its records were made with. That
+joint, compared with its validation record exactly as the diagnosis compares (the same
+:class:`.problem.Problem`: channels, prediction horizon, restarts, time channels or spring
+curve), shows the *truth floor* (:func:`truth_nmse`): sensor noise, encoder quantization and
+what the restarts from the filtered measured state cost. A diagnosis closes at most
+``before - truth`` of its NMSE (the *closable gap*, :func:`gap_cut`).
+
+Known only for generated cases; the workflow's own outcome estimates that floor without the
+truth (:func:`.floor.floor_nmse`). :func:`true_noise_nmse` measures the record's sensor noise
+alone (the measured channels against the same run's true states), the number
+:func:`.residuals.noise_nmse` estimates from the record.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hdgym.params import JointParams
+from hdgym.record import Record
+
+from . import residuals as R
+from .diagnosis import Diagnosis
+from .floor import floor_nmse
+from .problem import Problem
+
+
+def _judged(diag: Diagnosis) -> Problem | None:
+    """The comparison a diagnosis reports its before and after on (validation, else training)."""
+    return diag.validation or diag.problem
+
+
+def truth_nmse(diag: Diagnosis, truth: JointParams) -> float:
+    """Mean NMSE, percent, of the joint ``truth`` on the comparison the diagnosis reports
+    ``nmse_before`` and ``nmse_after`` on (nan without one, inf if the run diverges)."""
+    judged = _judged(diag)
+    if judged is None:
+        return math.nan
+    return float(judged.nmse(truth)["mean"])
+
+
+def floor_estimate(diag: Diagnosis) -> float:
+    """Mean over channels of :func:`.floor.floor_nmse` of the diagnosis's final model on its
+    judged comparison, percent (the workflow's own estimate of the truth floor; nan when it
+    cannot be made)."""
+    judged = _judged(diag)
+    if judged is None:
+        return math.nan
+    fl = floor_nmse(judged, diag.after.params)
+    return float(np.mean(list(fl.values()))) if fl else math.nan
+
+
+def gap_cut(before: float, after: float, truth: float) -> float:
+    """Share of the closable gap ``before - truth`` a diagnosis closed: ``(before - after) /
+    (before - truth)`` (nan when there is no gap: ``before <= truth``)."""
+    gap = before - truth
+    if not gap > 0 or not math.isfinite(gap):
+        return math.nan
+    return (before - after) / gap
+
+
+def true_noise_nmse(problem: Problem, clean: Record) -> dict[str, float]:
+    """The record's sensor noise as an NMSE, percent per channel and ``"mean"``.
+
+    ``problem`` compares the measured record (time channels); ``clean`` is the same run
+    without sensors (:class:`hdgym.sim.Simulator` with ``sensors=False``: true angles,
+    torque and current). Each filtered channel of ``clean`` is subtracted from the measured
+    one; the variance of the difference is divided by the measured channel's variance, as
+    :func:`.noise.noise_nmse` scales its estimate. Encoder quantization counts as noise, its
+    mean (half a count, which a model that floors its angles the same way shows too) not.
+    """
+    raw = R.Raw(np.asarray(clean.motor_angle, dtype=float),
+                None if problem.locked else np.asarray(clean.output_angle, dtype=float),
+                clean.output_torque, clean.motor_current)
+    true = R.channels(raw, problem.names, problem.ratio, problem.dt, problem.cutoff)
+    out = {k: 100.0 * float(np.var(problem.measured[k] - true[k])) / problem.sigma2[k]
+           for k in problem.names}
+    out["mean"] = float(np.mean([out[k] for k in problem.names])) if problem.names else 0.0
+    return out
+

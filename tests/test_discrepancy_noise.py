@@ -1,0 +1,86 @@
+"""The measurement-noise estimate of a record, against records of known noise."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hdgym.discrepancy import noise as N
+from hdgym.discrepancy import residuals as R
+from hdgym.discrepancy import truth as T
+
+DT = 1e-3
+CUTOFF = R.default_cutoff(DT)
+
+
+def _signal(n: int = 6000) -> np.ndarray:
+    """A smooth signal with a few steps (a commanded current), arbitrary units."""
+    t = np.arange(n) * DT
+    steps = np.repeat(np.random.default_rng(3).uniform(-2.0, 2.0, 12), n // 12)
+    return np.sin(2 * math.pi * 0.7 * t) + steps
+
+
+def test_white_noise_is_read_through_steps_and_a_smooth_signal():
+    rng = np.random.default_rng(0)
+    s = _signal()
+    for sigma in (0.003, 0.02, 0.1):
+        e = rng.normal(0.0, sigma, s.size)
+        assert abs(N.white_sigma(s + e) / sigma - 1.0) < 0.1, sigma
+        # the old first-difference estimate reads the steps as noise
+        old = math.sqrt(float(np.var(np.diff(s + e))) / 2.0)
+        if sigma == 0.003:
+            assert old > 3.0 * sigma
+    # the filtered channel's noise: the estimate against the noise actually left after the filter
+    e = rng.normal(0.0, 0.02, s.size)
+    raw = R.Raw(np.zeros(s.size), motor_current=s + e)
+    measured = R.channels(raw, ("motor_current",), 1.0, DT, CUTOFF)
+    est = N.noise_nmse(raw, ("motor_current",), 1.0, DT, CUTOFF, measured)
+    left = float(np.var(R.lowpass(e, DT, CUTOFF)))
+    true = 100.0 * left / float(np.var(measured["motor_current"]))
+    assert abs(est["motor_current"] / true - 1.0) < 0.25, (est, true)
+
+
+def test_quantization_noise_of_speed_and_angle_from_a_quantized_angle():
+    counts = 4000.0
+    t = np.arange(6000) * DT
+    for amp, hz in ((30.0, 1.0), (0.05, 0.5)):  # fast (many counts per sample), slow
+        theta = amp * np.sin(2 * math.pi * hz * t) + 0.3 * np.sin(2 * math.pi * 7 * t) * amp / 30
+        meas = R.quantize(theta, counts)
+        for name, deriv in (("motor_speed", True), ("motor_angle", False)):
+            raw = R.Raw(meas)
+            ch = R.channels(raw, (name,), 1.0, DT, CUTOFF)[name]
+            clean = R.channels(R.Raw(theta), (name,), 1.0, DT, CUTOFF)[name]
+            true = 100.0 * float(np.var(ch - clean)) / float(np.var(ch))
+            est = N.noise_nmse(raw, (name,), 1.0, DT, CUTOFF, {name: ch}, (counts, None))[name]
+            assert 0.4 < est / true < 2.5, (amp, name, est, true)
+            old = R.noise_nmse(raw, (name,), 1.0, DT, CUTOFF, {name: ch})[name]
+            if deriv and amp > 1.0:  # the old estimate took the speed's quantization as white
+                assert old > 10.0 * true
+
+
+def test_a_simulated_record_and_its_true_sensor_noise():
+    from hdgym.discrepancy.problem import Problem
+    from hdgym.params import preset
+    from hdgym.record import Record
+    from hdgym.sim import Simulator
+
+    p = preset("tuttle-joint3")
+    rec = Simulator(p).run("sine:0.78:2", 3.0, seed=2)
+    clean = Simulator(p, sensors=False).run("sine:0.78:2", 3.0, seed=2)
+    prob = Problem(Record(dict(rec.columns), dict(rec.meta), "x"), p)
+    true = T.true_noise_nmse(prob, clean)
+    est = N.noise_nmse(prob.raw, prob.names, prob.ratio, prob.dt, prob.cutoff, prob.measured,
+                       prob.counts)
+    for k in prob.names:
+        assert 0.3 < est[k] / true[k] < 3.0, (k, est[k], true[k])
+    # the joint that made the record, compared in one run, is exact on the angle channels
+    prob.segment = 0.0
+    assert prob.nmse(p)["motor_speed"] < 1e-9
+
+
+def test_gap_cut():
+    assert T.gap_cut(10.0, 5.0, 4.5) == 5.0 / 5.5
+    assert T.gap_cut(10.0, 4.0, 5.0) > 1.0  # below the truth: more than the gap
+    assert math.isnan(T.gap_cut(1.0, 0.5, 2.0))  # the truth above before: no gap
+    assert math.isnan(T.gap_cut(1.0, 0.5, math.nan))
