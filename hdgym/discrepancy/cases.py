@@ -348,6 +348,15 @@ def main(argv: list[str] | None = None) -> int:
         "the bend a refitted linear stiffness leaves stays. An effect found there is reported "
         "on the curve; a curve left above its noise with such an effect missing and "
         "explaining part of it is *unexplained*.",
+        "- On a free output whose time channels show nothing, with kinematic error or "
+        "position-dependent friction missing, the line channels are searched the same way "
+        "where the record has them (`hdgym.discrepancy.orders`): what the filter removes "
+        "from the raw transmission error and motor speed, regressed window by window (2 WG "
+        "turns) on orders 1, 2, 4 of each run's own WG angle, so a phase slip cannot move "
+        "them. The model runs window by window and only its slow drift is removed at each "
+        "window's end (restarting it on the filtered measured state rang into the lines). A "
+        "record has line channels when its highest line lies above half the cutoff and its "
+        "lines stand above the encoders' quantization and repeat from window to window.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "
         "from the measured state, event by event; the ringing at each stop no longer decides "

@@ -344,7 +344,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
                 x = shifted(part[b - a], row, ke_on, self.ratio, d_angle, d_speed)
         mc, oc = self.counts
         return O.channel_lines(R.quantize(th, mc), R.quantize(out, oc), self.ratio, self.dt,
-                               wins, self.names)
+                               self.cutoff, wins, self.names)
 
     def choose_horizon(self, p: JointParams, horizons: tuple[float, ...] = HORIZONS) -> float:
         """Set and return the prediction horizon (s) for this record, from the record.
