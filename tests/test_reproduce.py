@@ -256,3 +256,13 @@ def test_tuttle_page(tmp_path) -> None:
     text = (tmp_path / "fidelity.md").read_text()
     assert "hdgym reproduce tuttle" in text
     assert ok, text
+
+
+def test_within_is_inclusive_at_the_bound() -> None:
+    """A value exactly at a relative tolerance passes on both sides, whatever the
+    rounding: 4.25 Hz and 5.75 Hz against 5 Hz ±15 %; beyond it fails."""
+    from hdgym.reproduce.common import within
+
+    assert abs(4.25 / 5 - 1) > 0.15  # the rounding the bound must absorb
+    assert within(4.25, 5.0, 0.15) and within(5.75, 5.0, 0.15)
+    assert not within(4.24, 5.0, 0.15) and not within(5.76, 5.0, 0.15)

@@ -43,6 +43,8 @@ C_SDI = 8  # current noise sd, A
 C_HOR = 9  # task horizon, s
 C_TASK = 10  # first task-specific constant
 N_COMMON = C_TASK
+#: envs per task call of the threaded post functions
+POST_BLOCK = 64
 
 
 @nb.njit(cache=True, inline="always")
@@ -58,8 +60,8 @@ def _box(v: float) -> float:
 
 
 @nb.njit(cache=True, inline="always")
-def _unsafe(x: np.ndarray, bad: bool, c: np.ndarray) -> bool:
-    return bad or not (abs(x[TK]) <= c[C_TLIM]) or not (abs(x[W_M]) <= c[C_WLIM])
+def _unsafe(tk: float, w_m: float, bad: bool, t_lim: float, w_lim: float) -> bool:
+    return bad or not (abs(tk) <= t_lim) or not (abs(w_m) <= w_lim)
 
 
 # ---------------------------------------------------------------- tracking
@@ -89,69 +91,77 @@ def _settle(reward: float, unsafe: bool, fresh: bool, penalty: float) -> tuple[f
 
 
 @nb.njit(cache=True)
-def reference(t: float, p: np.ndarray) -> tuple[float, float]:
-    """Output reference (rad) and its rate (rad/s) at ``t`` for parameter row ``p``."""
-    kind = p[0]
-    th0 = p[1]
+def reference(t: float, p: np.ndarray, i: int) -> tuple[float, float]:
+    """Output reference (rad) and its rate (rad/s) at ``t`` for parameter row ``p[i]``.
+
+    Indexed in place: a row view per env costs an atomic reference count
+    increment and decrement, more than the arithmetic.
+    """
+    kind = p[i, 0]
+    th0 = p[i, 1]
     if kind == 0.0:  # staircase: 0, a, b, c over four segments of d s
-        k = int(t / p[5])
+        k = int(t / p[i, 5])
         if k <= 0:
             return th0, 0.0
-        return th0 + p[1 + min(k, 3)], 0.0
+        return th0 + p[i, 1 + min(k, 3)], 0.0
     if kind == 1.0:  # sine a sin(b t)
-        return th0 + p[2] * math.sin(p[3] * t), p[2] * p[3] * math.cos(p[3] * t)
+        return th0 + p[i, 2] * math.sin(p[i, 3] * t), p[i, 2] * p[i, 3] * math.cos(p[i, 3] * t)
     if kind == 2.0:  # constant speed a from time b
-        if t <= p[3]:
+        if t <= p[i, 3]:
             return th0, 0.0
-        return th0 + p[2] * (t - p[3]), p[2]
+        return th0 + p[i, 2] * (t - p[i, 3]), p[i, 2]
     # point-to-point minimum-jerk move of a rad starting at b, lasting c s
-    s = (t - p[3]) / p[4]
+    s = (t - p[i, 3]) / p[i, 4]
     if s <= 0.0:
         return th0, 0.0
     if s >= 1.0:
-        return th0 + p[2], 0.0
+        return th0 + p[i, 2], 0.0
     s3 = s * s * s
-    return (th0 + p[2] * s3 * (10.0 - 15.0 * s + 6.0 * s * s),
-            p[2] * 30.0 * s * s * (1.0 - s) * (1.0 - s) / p[4])
+    return (th0 + p[i, 2] * s3 * (10.0 - 15.0 * s + 6.0 * s * s),
+            p[i, 2] * 30.0 * s * s * (1.0 - s) * (1.0 - s) / p[i, 4])
 
 
-@nb.njit(cache=True, inline="always")
-def _track_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
-               act: np.ndarray, tp: np.ndarray, steps: np.ndarray, fresh: np.ndarray,
-               dt: float, c: np.ndarray, obs: np.ndarray, rew: np.ndarray, term: np.ndarray,
-               aux: np.ndarray) -> None:
-    """Observation, reward and safety termination of tracking env ``i``."""
-    # scales as reciprocals: one division per env instead of a dozen
+@nb.njit(cache=True, nogil=True)
+def _track_envs(lo: int, hi: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray,
+                z: np.ndarray, act: np.ndarray, tp: np.ndarray, steps: np.ndarray,
+                fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray, rew: np.ndarray,
+                term: np.ndarray, aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of tracking envs ``lo`` to ``hi - 1``.
+
+    Per range, not per env: an inlined per-env call took references on its array
+    arguments, two atomic operations per array and env, more than the arithmetic.
+    """
+    # scales as reciprocals: one division per batch instead of a dozen per env
     inv_rs = 1.0 / c[J_REF]
     inv_ratio = 1.0 / c[C_RATIO]
     inv_ws = 1.0 / c[C_WNOM]
     inv_wo = c[C_RATIO] * inv_ws
     inv_imax = 1.0 / c[C_IMAX]
     inv_err = 1.0 / c[J_ERR]
-    x = xs[i]
-    t = steps[i] * dt
-    r, rd = reference(t, tp[i])
-    th_m = meas[0, i]
-    th_o = meas[1, i]
-    o = obs[i]
-    o[0] = _box(th_o * inv_rs)
-    o[1] = _box(th_m * inv_ratio * inv_rs)
-    o[2] = _box(math.cos(th_m))
-    o[3] = _box(math.sin(th_m))
-    o[4] = _box(meas[2, i] * inv_ws)
-    o[5] = _box(meas[3, i] * inv_wo)
-    o[6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
-    o[7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) * inv_imax)
-    o[8] = _box(r * inv_rs)
-    o[9] = _box(rd * inv_wo)
-    o[10] = _box((r - th_o) * inv_err)
-    o[11] = _box(act[i])
-    e = r - x[TH_O]
-    cur = x[CUR] * inv_imax
-    reward = 1.0 / (1.0 + abs(e) * inv_err) - c[J_WCUR] * min(cur * cur, 4.0)
-    rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
-    aux[i, 0] = r
-    aux[i, 1] = e if math.isfinite(e) else 0.0
+    for i in range(lo, hi):
+        t = steps[i] * dt
+        r, rd = reference(t, tp, i)
+        th_m = meas[0, i]
+        th_o = meas[1, i]
+        obs[i, 0] = _box(th_o * inv_rs)
+        obs[i, 1] = _box(th_m * inv_ratio * inv_rs)
+        obs[i, 2] = _box(math.cos(th_m))
+        obs[i, 3] = _box(math.sin(th_m))
+        obs[i, 4] = _box(meas[2, i] * inv_ws)
+        obs[i, 5] = _box(meas[3, i] * inv_wo)
+        obs[i, 6] = _box((meas[4, i] + c[C_SDT] * z[i, 0]) / c[C_TNOM])
+        obs[i, 7] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) * inv_imax)
+        obs[i, 8] = _box(r * inv_rs)
+        obs[i, 9] = _box(rd * inv_wo)
+        obs[i, 10] = _box((r - th_o) * inv_err)
+        obs[i, 11] = _box(act[i])
+        e = r - xs[i, TH_O]
+        cur = xs[i, CUR] * inv_imax
+        reward = 1.0 / (1.0 + abs(e) * inv_err) - c[J_WCUR] * min(cur * cur, 4.0)
+        unsafe = _unsafe(xs[i, TK], xs[i, W_M], bad[i], c[C_TLIM], c[C_WLIM])
+        rew[i], term[i] = _settle(reward, unsafe, fresh[i], c[C_PEN])
+        aux[i, 0] = r
+        aux[i, 1] = e if math.isfinite(e) else 0.0
 
 
 @nb.njit(cache=True)
@@ -160,8 +170,8 @@ def post_tracking(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarr
                   fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                   rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
     """Observation, reward and safety termination of the tracking task (batch)."""
-    for i in range(xs.shape[0]):
-        _track_env(i, xs, bad, meas, z, act, tp, steps, fresh, dt, c, obs, rew, term, aux)
+    _track_envs(0, xs.shape[0], xs, bad, meas, z, act, tp, steps, fresh, dt, c, obs, rew, term,
+                aux)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -170,8 +180,10 @@ def post_tracking_parallel(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z:
                            fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                            rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
     """:func:`post_tracking` with the envs spread over the cores (same numbers)."""
-    for i in nb.prange(xs.shape[0]):
-        _track_env(i, xs, bad, meas, z, act, tp, steps, fresh, dt, c, obs, rew, term, aux)
+    n = xs.shape[0]
+    for b in nb.prange((n + POST_BLOCK - 1) // POST_BLOCK):
+        _track_envs(b * POST_BLOCK, min(n, (b + 1) * POST_BLOCK), xs, bad, meas, z, act, tp,
+                    steps, fresh, dt, c, obs, rew, term, aux)
 
 
 class TrackingTask:
@@ -270,12 +282,12 @@ REACH_TOLERANCE = 0.05
 SPEED_FILTER_S = 0.025
 
 
-@nb.njit(cache=True, inline="always")
-def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndarray,
-                   act: np.ndarray, tp: np.ndarray, ts: np.ndarray, steps: np.ndarray,
-                   fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
-                   rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
-    """Observation, reward and safety termination of resonance env ``i``.
+@nb.njit(cache=True, nogil=True)
+def _resonance_envs(lo: int, hi: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray,
+                    z: np.ndarray, act: np.ndarray, tp: np.ndarray, ts: np.ndarray,
+                    steps: np.ndarray, fresh: np.ndarray, dt: float, c: np.ndarray,
+                    obs: np.ndarray, rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
+    """Observation, reward and safety termination of resonance envs ``lo`` to ``hi - 1``.
 
     ``ts[i, 0]`` and ``ts[i, 1]`` hold the running means (first-order,
     time constant ``c[R_TAU]``) of the true and measured flexspline torque;
@@ -287,51 +299,52 @@ def _resonance_env(i: int, xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z:
     beta = dt / (c[R_TAU] + dt)
     beta_w = dt / (c[R_TAU_W] + dt)
     tn = c[C_TNOM]
-    x = xs[i]
-    wt = tp[i, 0]
-    t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
-    t_true = x[TK]
-    w_true = x[W_M]
-    t = steps[i] * dt
-    if fresh[i] or not math.isfinite(ts[i, 0]):
-        ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
-        ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
-    else:
-        ts[i, 0] += beta * (t_true - ts[i, 0])
-        ts[i, 1] += beta * (t_meas - ts[i, 1])
-    if fresh[i]:
-        ts[i, 2] = w_true if math.isfinite(w_true) else 0.0
-        ts[i, 3] = math.nan
-        ts[i, 4] = abs(t_true) if math.isfinite(t_true) else 0.0
-    else:
-        if math.isfinite(w_true):
-            ts[i, 2] += beta_w * (w_true - ts[i, 2])
-        if ts[i, 3] != ts[i, 3] and abs(ts[i, 2] - wt) <= c[R_TOL] * wt:
-            ts[i, 3] = t
-        a_t = abs(t_true)
-        if not (a_t <= ts[i, 4]):  # NaN torque counts as over any rating
-            ts[i, 4] = a_t if math.isfinite(a_t) else math.inf
-    th_m = meas[0, i]
-    o = obs[i]
-    o[0] = _box(meas[2, i] / wt)
-    o[1] = _box(meas[3, i] * c[C_RATIO] / wt)
-    o[2] = _box(math.cos(th_m))
-    o[3] = _box(math.sin(th_m))
-    o[4] = _box(t_meas / tn)
-    o[5] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
-    o[6] = _box(wt / c[C_WNOM])
-    o[7] = _box((t_meas - ts[i, 1]) / tn)
-    o[8] = _box(act[i])
-    o[9] = min(t / c[C_HOR], 1.0)  # saturates: past the horizon it looks like its end
-    speed_err = min(abs(wt - w_true) / wt, 2.0)
-    osc = (t_true - ts[i, 0]) / tn
-    reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
-    rew[i], term[i] = _settle(reward, _unsafe(x, bad[i], c), fresh[i], c[C_PEN])
-    aux[i, 0] = wt
-    aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
-    aux[i, 2] = ts[i, 3] if ts[i, 3] == ts[i, 3] else -1.0  # -1: not reached (info stays finite)
-    aux[i, 3] = ts[i, 4] if ts[i, 4] < math.inf else 1e30
-    aux[i, 4] = 1.0 if (ts[i, 3] <= c[R_DEADLINE] and ts[i, 4] <= c[C_TLIM]) else 0.0
+    for i in range(lo, hi):
+        wt = tp[i, 0]
+        t_meas = meas[4, i] + c[C_SDT] * z[i, 0]
+        t_true = xs[i, TK]
+        w_true = xs[i, W_M]
+        t = steps[i] * dt
+        if fresh[i] or not math.isfinite(ts[i, 0]):
+            ts[i, 0] = t_true if math.isfinite(t_true) else 0.0
+            ts[i, 1] = t_meas if math.isfinite(t_meas) else 0.0
+        else:
+            ts[i, 0] += beta * (t_true - ts[i, 0])
+            ts[i, 1] += beta * (t_meas - ts[i, 1])
+        if fresh[i]:
+            ts[i, 2] = w_true if math.isfinite(w_true) else 0.0
+            ts[i, 3] = math.nan
+            ts[i, 4] = abs(t_true) if math.isfinite(t_true) else 0.0
+        else:
+            if math.isfinite(w_true):
+                ts[i, 2] += beta_w * (w_true - ts[i, 2])
+            if ts[i, 3] != ts[i, 3] and abs(ts[i, 2] - wt) <= c[R_TOL] * wt:
+                ts[i, 3] = t
+            a_t = abs(t_true)
+            if not (a_t <= ts[i, 4]):  # NaN torque counts as over any rating
+                ts[i, 4] = a_t if math.isfinite(a_t) else math.inf
+        th_m = meas[0, i]
+        obs[i, 0] = _box(meas[2, i] / wt)
+        obs[i, 1] = _box(meas[3, i] * c[C_RATIO] / wt)
+        obs[i, 2] = _box(math.cos(th_m))
+        obs[i, 3] = _box(math.sin(th_m))
+        obs[i, 4] = _box(t_meas / tn)
+        obs[i, 5] = _box((meas[5, i] + c[C_SDI] * z[i, 1]) / c[C_IMAX])
+        obs[i, 6] = _box(wt / c[C_WNOM])
+        obs[i, 7] = _box((t_meas - ts[i, 1]) / tn)
+        obs[i, 8] = _box(act[i])
+        obs[i, 9] = min(t / c[C_HOR], 1.0)  # saturates: past the horizon it looks like its end
+        speed_err = min(abs(wt - w_true) / wt, 2.0)
+        osc = (t_true - ts[i, 0]) / tn
+        reward = 1.0 - speed_err - c[R_WOSC] * min(osc * osc, 4.0)
+        unsafe = _unsafe(xs[i, TK], xs[i, W_M], bad[i], c[C_TLIM], c[C_WLIM])
+        rew[i], term[i] = _settle(reward, unsafe, fresh[i], c[C_PEN])
+        aux[i, 0] = wt
+        aux[i, 1] = osc * tn if math.isfinite(osc) else 0.0
+        # -1: not reached (info stays finite)
+        aux[i, 2] = ts[i, 3] if ts[i, 3] == ts[i, 3] else -1.0
+        aux[i, 3] = ts[i, 4] if ts[i, 4] < math.inf else 1e30
+        aux[i, 4] = 1.0 if (ts[i, 3] <= c[R_DEADLINE] and ts[i, 4] <= c[C_TLIM]) else 0.0
 
 
 @nb.njit(cache=True)
@@ -340,9 +353,8 @@ def post_resonance(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z: np.ndar
                    fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                    rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
     """Observation, reward and safety termination of the resonance task (batch)."""
-    for i in range(xs.shape[0]):
-        _resonance_env(i, xs, bad, meas, z, act, tp, ts, steps, fresh, dt, c, obs, rew, term,
-                       aux)
+    _resonance_envs(0, xs.shape[0], xs, bad, meas, z, act, tp, ts, steps, fresh, dt, c, obs,
+                    rew, term, aux)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -351,9 +363,10 @@ def post_resonance_parallel(xs: np.ndarray, bad: np.ndarray, meas: np.ndarray, z
                             fresh: np.ndarray, dt: float, c: np.ndarray, obs: np.ndarray,
                             rew: np.ndarray, term: np.ndarray, aux: np.ndarray) -> None:
     """:func:`post_resonance` with the envs spread over the cores (same numbers)."""
-    for i in nb.prange(xs.shape[0]):
-        _resonance_env(i, xs, bad, meas, z, act, tp, ts, steps, fresh, dt, c, obs, rew, term,
-                       aux)
+    n = xs.shape[0]
+    for b in nb.prange((n + POST_BLOCK - 1) // POST_BLOCK):
+        _resonance_envs(b * POST_BLOCK, min(n, (b + 1) * POST_BLOCK), xs, bad, meas, z, act, tp,
+                        ts, steps, fresh, dt, c, obs, rew, term, aux)
 
 
 class ResonanceTask:

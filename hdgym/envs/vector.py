@@ -6,7 +6,10 @@ vectorization_mode="vector_entry_point")`` returns a
 (randomized per episode when ``randomize`` is given). The physics runs in
 SIMD lanes (:mod:`hdgym.physics.lanes`); batches of
 ``lanes.PARALLEL_THRESHOLD`` envs and more spread over all cores. The
-results are the same either way.
+results are the same either way. A step is one compiled call
+(:mod:`hdgym.envs.fused`) that writes fresh output arrays; the single env
+steps through the composed :meth:`JointBatch.advance`, with the same
+numbers.
 
 Seeding: ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (or ``seed`` may
 be a list of per-env seeds), so env ``i`` follows exactly the trajectory of
@@ -26,6 +29,7 @@ the same keys as arrays of ``n`` with ``_key`` masks.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -33,9 +37,15 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from hdgym.envs.common import INFO_STATES, JointBatch, action_space, observation_space
+from hdgym.envs.common import (
+    INFO_STATES,
+    NOISE_BLOCK,
+    JointBatch,
+    action_space,
+    observation_space,
+)
+from hdgym.envs.fused import N_INFO_FIXED, TASK_IDS, first_bad_action, vector_step
 from hdgym.envs.tasks import ResonanceTask, TrackingTask
-from hdgym.hardware import scale_actions
 from hdgym.physics import layout as L
 
 
@@ -100,6 +110,17 @@ class HarmonicDriveVectorEnv(VectorEnv):
         self._seeded = False
         self._mask = np.ones(self.num_envs, dtype=np.bool_)
         self._mask.flags.writeable = False
+        # the fused step (hdgym.envs.fused): its buffers and the info layout
+        b, n = self.batch, self.num_envs
+        self._task_id = TASK_IDS[task.name]
+        self._imax = b.rows[:, L.I_MAX]
+        self._meas = np.zeros((6, n))
+        self._z = np.zeros((n, 2))
+        self._n_done = 0  # envs in prev_done
+        self._noise_left = 0  # steps before some env's noise block runs out (0: look)
+        self._info_names = (*INFO_STATES, "time", *task.aux_names)
+        assert len(INFO_STATES) + 1 == N_INFO_FIXED
+        self._masks = {"_" + k: self._mask for k in (*self._info_names, "diverged")}
 
     def _info(self) -> dict[str, Any]:
         b = self.batch
@@ -135,36 +156,84 @@ class HarmonicDriveVectorEnv(VectorEnv):
             self.batch.set_rngs([seeding.np_random(None)[0] for _ in range(n)], reseeded=True)
             self._seeded = True
         self.batch.reset_all()
-        self.prev_done[:] = False
+        self.prev_done = np.zeros(n, dtype=np.bool_)
+        self._n_done = 0
+        self._noise_left = 0
         return self.batch.obs.copy(), self._info()
+
+    def _refill_noise(self) -> None:
+        """Draw a new noise block for the envs whose block is used up (their own generators)."""
+        b = self.batch
+        if not b.noise or self._noise_left > 0:
+            return
+        ptr = b.noise_ptr
+        for i in np.flatnonzero(ptr >= NOISE_BLOCK):
+            b.rngs[i].standard_normal((NOISE_BLOCK, 2), out=b.noise_buf[i])
+            ptr[i] = 0
+        self._noise_left = NOISE_BLOCK - int(ptr.max())
+
+    def _fused(self, phase: int, a: np.ndarray, fresh: np.ndarray,
+               out: tuple[np.ndarray, ...]) -> tuple[int, int]:
+        b = self.batch
+        bank = b.bank
+        obs, rew, term, trunc, done, inf = out
+        limit = math.inf if self.max_episode_steps is None else self.max_episode_steps
+        if phase != 1:
+            self._noise_left -= 1
+        return vector_step(b.lanes.parallel, phase, self._task_id, a, self._imax, b.lanes.W,
+                           b.n_substeps, b.xs, b.bad, b.i_cmd, b.t_ext, b.act, bank._steps,
+                           bank._prev, bank._held, bank.torque_sensor, bank.delay, self._meas,
+                           b.noise_buf, b.noise_ptr, b.noise, self._z, b.tp, b.ts, b.steps,
+                           fresh, b.ctrl_dt, b.consts, obs, rew, term, b.aux, inf, trunc, done,
+                           limit)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
         b = self.batch
+        n = self.num_envs
         a = np.asarray(actions)
-        if a.size != self.num_envs or a.dtype.kind not in "fiu":
-            raise ValueError(f"actions must be numbers of shape ({self.num_envs}, 1), got "
+        if a.size != n or a.dtype.kind not in "fiu":
+            raise ValueError(f"actions must be numbers of shape ({n}, 1), got "
                              f"{a.dtype} {a.shape}")
-        scale_actions(a.reshape(self.num_envs), b.rows[:, L.I_MAX], b.act, b.i_cmd)
-        done = self.prev_done
-        b.advance(done if done.any() else None)
-        term = b.term.copy()
-        if self.max_episode_steps is not None:
-            trunc = b.steps >= self.max_episode_steps
+        a = a.reshape(n)
+        k = first_bad_action(a)
+        if k >= 0:
+            raise ValueError(f"action must be finite, got {a[k]!r} for env {k}")
+        # fresh outputs, written by the compiled step: nothing handed out is reused
+        obs = np.empty(b.obs.shape, dtype=np.float32)
+        rew = np.empty(n)
+        term = np.empty(n, dtype=np.bool_)
+        trunc = np.empty(n, dtype=np.bool_)
+        done = np.empty(n, dtype=np.bool_)
+        inf = np.empty((len(self._info_names), n))
+        out = (obs, rew, term, trunc, done, inf)
+        if self._n_done:  # NEXT_STEP: envs that ended last step start over instead
+            fresh = self.prev_done
+            self._fused(1, a, fresh, out)
+            b.reset_envs(np.flatnonzero(fresh))
+            self._refill_noise()
+            n_bad, n_end = self._fused(2, a, fresh, out)
         else:
-            trunc = np.zeros(self.num_envs, dtype=np.bool_)
-        rew = b.rew.copy()
-        ended = term | trunc
+            self._refill_noise()
+            n_bad, n_end = self._fused(0, a, b.no_fresh, out)
+        b.obs, b.rew, b.term = obs, rew, term
+        if n_bad:  # as JointBatch.true_states: no NaN in info
+            np.nan_to_num(inf[:len(INFO_STATES)], copy=False, nan=0.0, posinf=0.0, neginf=0.0)
+        info = dict(zip(self._info_names, inf, strict=True))
+        info["diverged"] = b.bad.copy()
+        info.update(self._masks)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
-            self.prev_done = ended
-        elif ended.any():  # SAME_STEP: the ended envs start over within this step
-            final_obs, final_info = b.obs.copy(), self._info()
-            b.restart(ended)
+            self.prev_done = done
+            self._n_done = n_end
+        elif n_end:  # SAME_STEP: the ended envs start over within this step
+            final_obs = obs.copy()
+            b.restart(done)
+            self._noise_left = 0
+            final_info = info
             info = self._info()
-            info["final_obs"], info["_final_obs"] = final_obs, ended
-            info["final_info"], info["_final_info"] = final_info, ended
-            return b.obs.copy(), rew, term, trunc, info
-        return b.obs.copy(), rew, term, trunc, self._info()
+            info["final_obs"], info["_final_obs"] = final_obs, done
+            info["final_info"], info["_final_info"] = final_info, done
+        return obs, rew, term, trunc, info
 
     def render(self) -> np.ndarray | None:
         """A frame of env 0 (``render_mode="rgb_array"``)."""

@@ -23,6 +23,7 @@ from hdgym.effects import flags_of
 from hdgym.params import JointParams
 from hdgym.physics import kernel
 from hdgym.physics import layout as L
+from hdgym.reproduce.common import within
 
 # ===================================================================== (a) KE spectrum
 
@@ -229,7 +230,7 @@ def plateau_near(currents: np.ndarray, speeds: np.ndarray, target: float, tol: f
             s = sp[a: b + 1]
             if s.min() <= 0 or s.max() / s.min() - 1 > spread:
                 break
-            if abs(s.mean() / target - 1) <= tol and (best is None or b - a > best[1] - best[0]):
+            if within(s.mean(), target, tol) and (best is None or b - a > best[1] - best[0]):
                 best = (a, b)
     return best
 

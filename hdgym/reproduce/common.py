@@ -76,6 +76,15 @@ class Item:
         return bool(passed)
 
 
+def within(value: float, reference: float, tol: float) -> bool:
+    """Whether ``value`` is within the relative tolerance ``tol`` of ``reference``.
+
+    The bound is inclusive up to rounding: 4.25 Hz against 5 Hz ±15 % passes
+    (``abs(4.25 / 5 - 1)`` is 0.15000000000000002 in floating point).
+    """
+    return bool(abs(value / reference - 1.0) <= tol * (1.0 + 1e-9))
+
+
 def plt_module() -> Any:
     """``matplotlib.pyplot`` on the Agg backend (no display needed)."""
     import matplotlib

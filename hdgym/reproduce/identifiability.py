@@ -28,7 +28,7 @@ import numpy as np
 
 from hdgym.identify import MaxwellSlipFit, cycle_energy, fit_maxwell_slip, nmse, virgin_curve_error
 from hdgym.params import JointParams, preset
-from hdgym.reproduce.common import Item, finish, plt_module, simulator
+from hdgym.reproduce.common import Item, finish, plt_module, simulator, within
 
 #: seed 002's NMSE on measured loops, percent: training (WAVE-Drive) and validation (pancake)
 SEED002_TRAINING_NMSE = 0.94
@@ -99,7 +99,7 @@ def _maxwell_part(item: Item, quick: bool, ax) -> bool:
                                f"{inside:.2f} %", inside <= 3.0)
             good &= item.check("A: strength of the elements that slipped", "the loops' "
                                "half-height", f"{s_true:.4f} N m", "±10 %",
-                               f"{s_fit:.4f} N m", abs(s_fit / s_true - 1) <= 0.10)
+                               f"{s_fit:.4f} N m", within(s_fit, s_true, 0.10))
             ok &= good
             item.measured.append(f"A, full: validation NMSE <= {SEED002_VALIDATION_NMSE} %, "
                                  "virgin curve within 3 % over the excited torsion, slipped "

@@ -29,7 +29,7 @@ from hdgym.reproduce.analysis import (
     starting_current,
     step_table,
 )
-from hdgym.reproduce.common import Item, Paper, finish, plt_module, simulator
+from hdgym.reproduce.common import Item, Paper, finish, plt_module, simulator, within
 from hdgym.reproduce.tuttle_steps import (
     check_joint1_steps,
     check_joint1_torque,
@@ -70,7 +70,7 @@ def check_ke(out: Path, quick: bool) -> Item:
         pp = math.degrees(spec.peak_to_peak)
         target = KE_PP_DEG[name]
         dominant = a2 > max(others)
-        pp_ok = abs(pp / target - 1) <= 0.15
+        pp_ok = within(pp, target, 0.15)
         no1 = a1 < 0.1 * a2 if name == "tuttle-joint1" else True
         ok &= dominant and pp_ok and no1
         joint = name.replace("tuttle-", "").replace("joint", "joint ")
@@ -134,7 +134,7 @@ def check_resonance(out: Path, quick: bool) -> Item:
         t, u, _, states = sim.trajectory(f"random:{amp!r}:200", duration, seed=3)
         f, h, coh = frequency_response(u, states[:, L.TK], sim.ctrl_dt)
         fpk = resonance_peak(f, np.abs(h))
-        good = abs(fpk / fn - 1) <= 0.10
+        good = within(fpk, fn, 0.10)
         ok &= good
         item.check(f"{name.replace('tuttle-joint', 'joint ')}: torsional resonance",
                    "resonant regions occur when the frequency of kinematic-error fluctuations "

@@ -35,7 +35,7 @@ from hdgym.reproduce.analysis import (
     run_up,
     step_runs,
 )
-from hdgym.reproduce.common import Item, finish, plt_module
+from hdgym.reproduce.common import Item, finish, plt_module, within
 
 #: Tuttle §2.6 step currents, A: joint 1 by 0.4 A (his 2.8, 3.2, ... 4.0 A), joints 2
 #: and 3 over the ranges he used (1.4-4.5 A, 0.28-0.60 A) on a finer grid
@@ -168,7 +168,7 @@ class Joint1Steps:
 
     @property
     def speed_ok(self) -> bool:
-        return bool(abs(self.plateau_mean / PLATEAU_SPEED_DEG - 1) <= SPEED_TOL)
+        return within(self.plateau_mean, PLATEAU_SPEED_DEG, SPEED_TOL)
 
     @property
     def model4_ok(self) -> bool:
