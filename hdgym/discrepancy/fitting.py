@@ -53,7 +53,7 @@ Neither step is better everywhere (used for every fit, the coarse step left the 
 cases' fits less precise: kinematic_error 0.49 -> 10.5 % after, 'none (current steps)'
 took on kinematic error), so :func:`fit` runs both from the same start and keeps the
 cheaper, and only where a base model is refitted before the outcome is judged
-(:func:`.workflow._settle`)."""
+(:func:`.settle.settle`)."""
 
 
 def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 40,

@@ -51,6 +51,7 @@ from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
+from .settle import settle
 from .spring_search import search_spring
 
 THRESHOLD = 0.4
@@ -277,32 +278,6 @@ def _choose_horizon(problem: Problem, vprob: Problem | None, p: JointParams,
         vprob.segment = problem.segment
 
 
-def _settle(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
-            nfev: int, auto: bool, conclusion: str) -> tuple[FitResult, str]:
-    """The base model refitted once more when no effect was added, before the outcome.
-
-    A base model a few per cent off nominal may stop short of its optimum: seen from there
-    the cost is a staircase on the scale of the fine difference step (encoder counts,
-    whole substeps), least squares stops, and a residual of fit slack is left that the
-    outcome would call unexplained (the hold-out case tuttle-joint3 / none / sine:0.182:2,
-    5 s fit window: 3.9 % at 0.05 s against the truth's 1.45 %). The refit also differences
-    a coarse step
-    (:data:`.fitting.COARSE_STEP`) and keeps the cheaper fit; the horizon is then chosen
-    again with it (:meth:`.problem.Problem.choose_horizon`). It runs only after the search
-    (a base fit that closes in on its optimum before the search also mimics the missing
-    effect more closely: on the tuned cases the effects were then fitted worse).
-    """
-    refit = fit(problem, current.params, model_params(current.params, problem.scales, given),
-                max_nfev=nfev, coarse=True)
-    if not refit.cost < current.cost:
-        return current, conclusion
-    if auto and not problem.inverse:
-        _choose_horizon(problem, vprob, refit.params)
-        refit = rescored(problem, refit)
-    return refit, (conclusion + f"; the base model refitted (coarse and fine difference steps):"
-                   f" NMSE {current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
-
-
 def diagnose(record: Record, params: JointParams, validate: Record | None = None, *,
              mode: str = "auto", threshold: float = THRESHOLD, max_steps: int = MAX_STEPS,
              quick: bool = False, cutoff: float | None = None,
@@ -432,8 +407,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
     if not steps:
-        current, conclusion = _settle(problem, vprob, current, params, nfev_base, auto,
-                                      conclusion)
+        current, conclusion = settle(problem, vprob, current, params, nfev_base, auto,
+                                     conclusion, _choose_horizon)
         before = current
     prog.close()
     if (before.nmse is not None and problem.segment != chosen

@@ -1,0 +1,93 @@
+"""The base model settled before a diagnosis that added nothing is judged (:mod:`.settle`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hdgym.discrepancy import settle as S
+from hdgym.discrepancy.effect import FitParam
+from hdgym.discrepancy.fitting import FitResult, fit
+from hdgym.discrepancy.paths import get_value, set_values
+from hdgym.params import preset
+
+PATHS = ("motor.inertia", "compliance.stiffness")
+
+
+class _Record:
+    """A stand-in problem: its residual is linear in the two parameters' relative errors
+    ``(a, b)`` through ``A`` (a column of ``A`` per parameter), plus a fixed part ``c``
+    no parameter reaches (what a missing effect leaves)."""
+
+    names = ("x",)
+    stick_slip = False
+    inverse = False
+    scales = None
+
+    def __init__(self, truth, A, c=None, noise=0.01):
+        self.truth, self.A = truth, np.asarray(A, dtype=float)
+        self.c = np.zeros(self.A.shape[0]) if c is None else np.asarray(c, dtype=float)
+        self.measured = {"x": np.zeros(self.A.shape[0])}
+        self.noise = {"x": noise, "mean": noise}
+
+    def vector(self, p, decimate=1):
+        e = np.array([get_value(p, k) / get_value(self.truth, k) - 1 for k in PATHS])
+        return self.A @ e + self.c
+
+    def nmse(self, p):
+        v = 100.0 * float(np.sum(self.vector(p) ** 2))
+        return {"x": v, "mean": v}
+
+
+def _fps(truth):
+    return [FitParam(k, 0.5 * get_value(truth, k), 2.0 * get_value(truth, k)) for k in PATHS]
+
+
+def _start(truth, fa, fb):
+    return set_values(truth, {PATHS[0]: fa * get_value(truth, PATHS[0]),
+                              PATHS[1]: fb * get_value(truth, PATHS[1])})
+
+
+def test_converge_refits_until_the_cost_stops_falling():
+    """One fit's budget stops short on a long, ill-conditioned valley; further rounds reach
+    the optimum, and they stop once a round gains little."""
+    truth = preset("tuttle-joint3")
+    t = np.linspace(0.0, 1.0, 60)
+    prob = _Record(truth, np.column_stack([np.sin(5 * t), np.sin(5 * t) + 0.02 * t]))
+    p0 = _start(truth, 1.3, 0.75)
+    one = fit(prob, p0, _fps(truth), max_nfev=3, coarse=True)
+    more = S.converge(prob, p0, _fps(truth), 3, rounds=20)
+    assert more.cost < 0.01 * one.cost
+    for k in PATHS:
+        assert get_value(more.params, k) == pytest.approx(get_value(truth, k), rel=0.01)
+
+
+def test_two_records_stack_both_residuals():
+    truth = preset("tuttle-joint3")
+    a = _Record(truth, np.eye(2))
+    b = _Record(truth, 2 * np.eye(2))
+    both = S.TwoRecords(a, b)
+    p = _start(truth, 1.1, 1.0)
+    assert np.allclose(both.vector(p), [0.1, 0.0, 0.2, 0.0])
+    assert both.nmse(p)["mean"] == pytest.approx(0.5 * (a.nmse(p)["mean"] + b.nmse(p)["mean"]))
+
+
+def test_settle_refits_on_both_records_when_training_does_not_pin_the_parameters(monkeypatch):
+    """The training record sees only the sum of the two errors (a valley), the validation
+    record each: the training fit stops anywhere in the valley and the validation residual
+    of that setting is no missing effect. Refitted on both records it goes; a residual no
+    parameter reaches (a missing effect, in both records) stays."""
+    truth = preset("tuttle-joint3")
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    val = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])
+    p0 = _start(truth, 1.04, 0.96)  # in the training valley: its cost there is zero
+    cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
+    assert val.nmse(p0)["mean"] > 10.0
+    out, why = S.settle(train, val, cur, truth, 20, False, "nothing (more) worth adding")
+    assert val.nmse(out.params)["mean"] < 0.01
+    assert "training and validation records together" in why
+    # a residual no setting of the parameters reaches is left to the outcome
+    missing = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]], c=[0.0, 0.0, 3.0])
+    out, why = S.settle(train, missing, cur, truth, 20, False, "")
+    assert missing.nmse(out.params)["mean"] >= 100 * 3.0**2
