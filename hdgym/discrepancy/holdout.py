@@ -206,7 +206,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     Both runs of the case's command are simulated without sensor noise, with and without
     the hidden effect (its switch off); the change of the comparison channels is an NMSE,
     percent, mean over channels, against the measured record's variance, beside the
-    record's measurement-noise NMSE (:func:`.residuals.noise_nmse`).
+    record's measurement-noise NMSE (:func:`.noise.noise_nmse`).
     """
     from . import residuals as R
     from .problem import Problem
@@ -240,7 +240,7 @@ class Result:
     (:func:`.truth.truth_nmse`: the floor no model goes below); ``floor``: the workflow's own
     estimate of it (:func:`.truth.floor_estimate`); ``noise_true`` and ``noise_est``: the
     validation record's sensor noise per channel and its mean (:func:`.truth.true_noise_nmse`)
-    and what :func:`.residuals.noise_nmse` estimates from the record, NMSE percent.
+    and what :func:`.noise.noise_nmse` estimates from the record, NMSE percent.
     """
 
     case: Blind
