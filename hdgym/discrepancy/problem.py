@@ -36,6 +36,7 @@ from . import residuals as R
 from . import spring as S
 from .effect import Scales
 from .inverse import InverseComparison
+from .noise import noise_nmse
 from .record_scales import RecordScales
 from .restarts import Restarts, shifted
 
@@ -155,8 +156,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
             self.mask = ~excluded if self.mask is None else self.mask & ~excluded
         self.sigma2 = {k: max(float(np.var(self._m(v))), 1e-300)
                        for k, v in self.measured.items()}
-        self.noise = R.noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
-                                  {k: self._m(v) for k, v in self.measured.items()})
+        self.noise = noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
+                                {k: self._m(v) for k, v in self.measured.items()}, self.counts)
         self.noise_time = self.noise
         self.context = self._context()
         self.scales = self._scales()
