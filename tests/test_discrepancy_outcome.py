@@ -59,7 +59,7 @@ def test_a_named_model_is_judged_against_its_own_floor():
 
 def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     from hdgym.discrepancy.fitting import fit
-    from hdgym.discrepancy.spring_search import search_spring
+    from hdgym.discrepancy.spring_search import search_view
     from hdgym.discrepancy.workflow import ESCALATED_GAIN, MIN_SCORE, THRESHOLD, _search
     from hdgym.params import preset
     from hdgym.record import Record
@@ -85,7 +85,7 @@ def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     assert prob.noise is prob.noise_time and prob.segment == 0.5 and len(prob.names) == 3
     # the workflow's spring search names it there
     paths = [f.path for f in fps]
-    accepted, _, _, stuck = search_spring(
+    accepted, _, _, stuck = search_view(
         prob, None, base, given, 10, MIN_SCORE,
         lambda cur: _search(prob, None, cur, given, paths, THRESHOLD, 10, 20, ESCALATED_GAIN))
     assert accepted is not None and accepted[0]["name"] == "nonlinear_stiffness"

@@ -17,7 +17,9 @@ import pytest
 
 import hdgym  # noqa: F401  (registers the ids)
 from hdgym.envs.common import NOISE_BLOCK
+from hdgym.hardware import scale_actions
 from hdgym.params import preset
+from hdgym.physics import layout as L
 
 IDS = ("HarmonicDriveJoint-v0", "HarmonicDriveResonance-v0")
 JOINT = preset("tuttle-joint1")
@@ -57,3 +59,31 @@ def test_fused_vector_step_equals_single_envs(env_id, parallel, sensors):
             n_term += term
             n_trunc += trunc
     assert n_term >= n and n_trunc >= n  # autoresets everywhere, mid-block
+
+
+def test_fused_step_mixed_with_composed_advance_keeps_the_noise_stream():
+    """Steps through ``JointBatch.advance`` (as agents.vec_env holds actions) between
+    fused steps, past a noise-block refill: the fused step must see the samples the
+    composed path took (a stale count would read past the block)."""
+    n, seed, steps = 5, 8, NOISE_BLOCK + 60
+    kw = {"preset": JOINT, "sensors": {"torque_noise": 0.4, "current_noise": 0.02},
+          "max_episode_steps": 10_000}
+    venv = gym.make_vec(IDS[0], num_envs=n, vectorization_mode="vector_entry_point", **kw)
+    u = venv.unwrapped
+    singles = [gym.make(IDS[0], **kw) for _ in range(n)]
+    acts = np.random.default_rng(9).uniform(-0.3, 0.3, (steps, n, 1)).astype(np.float32)
+    venv.reset(seed=seed)
+    for i, env in enumerate(singles):
+        env.reset(seed=seed + i)
+    for k in range(steps):
+        if k % 3 == 1:  # the composed path, as agents.vec_env._step_held
+            scale_actions(acts[k].reshape(n), u.batch.rows[:, L.I_MAX], u.batch.act,
+                          u.batch.i_cmd)
+            u.batch.advance()
+            vobs = u.batch.obs
+        else:
+            vobs = venv.step(acts[k])[0]
+        for i, env in enumerate(singles):
+            obs, _, term, trunc, _ = env.step(acts[k, i])
+            assert not (term or trunc)
+            np.testing.assert_array_equal(vobs[i], obs, err_msg=f"step {k} env {i}")

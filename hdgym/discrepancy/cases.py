@@ -336,11 +336,12 @@ def main(argv: list[str] | None = None) -> int:
         "show is listed as untestable with what the record lacks and the protocol "
         "(`hdgym experiment ...`) whose record would show it; so is one that, at the size the "
         "record suggests, would change the channels by less than their measurement noise. "
-        "*Outcome* is *named*, *nothing missing* (final NMSE within 3 x the measurement-noise "
-        "NMSE, or at most 0.5 %, and no channel alone unexplained: above 3 x what the fitted "
-        "model shows on a record it made itself and beyond what its fitted parameters can "
-        "change it, `hdgym.discrepancy.floor`) or *unexplained*; a "
-        "named effect that leaves more than that is *named; rest unexplained*.",
+        "*Outcome* is *named* (final NMSE within 2 x what the final model shows on a record "
+        "it made itself, its own floor, `hdgym.discrepancy.floor.floor_nmse`), *named; rest "
+        "unexplained* (above that), *nothing missing* (nothing named; final NMSE within 3 x "
+        "the measurement-noise NMSE, `hdgym.discrepancy.noise`, or at most 0.5 %) or "
+        "*unexplained*; no channel alone may be above 3 x its floor and beyond what "
+        "the fitted parameters can change it (`hdgym.discrepancy.floor`).",
         "- On a locked output whose time channels show nothing, the spring curve is searched "
         "for the spring's effects (nonlinear stiffness, hysteresis: `Effect.compare`): the "
         "motor angle's residual averaged over bins of the measured torque and its direction, "
@@ -348,6 +349,15 @@ def main(argv: list[str] | None = None) -> int:
         "the bend a refitted linear stiffness leaves stays. An effect found there is reported "
         "on the curve; a curve left above its noise with such an effect missing and "
         "explaining part of it is *unexplained*.",
+        "- On a free output whose time channels show nothing, with kinematic error or "
+        "position-dependent friction missing, the line channels are searched the same way "
+        "where the record has them (`hdgym.discrepancy.orders`): what the filter removes "
+        "from the raw transmission error and motor speed, regressed window by window (2 WG "
+        "turns) on orders 1, 2, 4 of each run's own WG angle, so a phase slip cannot move "
+        "them. The model runs window by window and only its slow drift is removed at each "
+        "window's end (restarting it on the filtered measured state rang into the lines). A "
+        "record has line channels when its highest line lies above half the cutoff and its "
+        "lines stand above the encoders' quantization and repeat from window to window.",
         "- Free-output records with a torque sensor restart at rest at the measured held "
         "torque as well (clipped to what the model can hold), so each breakaway is compared "
         "from the measured state, event by event; the ringing at each stop no longer decides "

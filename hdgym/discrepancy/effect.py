@@ -155,7 +155,9 @@ class Effect:
         compare: the comparisons that reveal it: ``"time"`` (the channels sample by
             sample) and, for the spring's effects, ``"spring"`` (on a locked output, the
             residuals averaged over bins of the measured torque and its direction: the
-            spring curve, :mod:`.spring`).
+            spring curve, :mod:`.spring`) and, for the order-line effects, ``"lines"``
+            (on a free output, line amplitudes at orders of each run's own WG angle,
+            :mod:`.orders`).
         sized: ``sized(scales)`` -> whether :meth:`switch_on` reads its size
             parameters (those with lower bound 0) from the record; the trial start
             then searches near them instead of over their whole range.

@@ -71,7 +71,8 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     :data:`COARSE_STEP` of each range, and the cheaper of the two is kept (``max_nfev`` each).
     """
     if decimate is None:
-        decimate = max(1, problem.measured[problem.names[0]].size // 8000)
+        first = problem.measured.get(problem.names[0])  # (line channels: coefficients)
+        decimate = 1 if first is None else max(1, first.size // 8000)
     fps = [fp for fp in fps if fp.upper > fp.lower]
     if not fps:
         nm = problem.nmse(p)

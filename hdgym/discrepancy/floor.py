@@ -56,9 +56,10 @@ def floor_nmse(problem: Problem, p: JointParams, seed: int = FLOOR_SEED) -> dict
         x0 = sim.initial_state(float(problem.raw.motor_angle[0]))
         rec = sim.run(problem.u, seed=seed, load_torque=problem.t_ext, state=x0)
         own = Problem(Record(dict(rec.columns), dict(rec.meta), "comparison floor"), p,
-                      mode=problem.mode, cutoff=problem.cutoff, channels=problem.names,
+                      mode=problem.mode, cutoff=problem.cutoff,
+                      channels=problem.time_names if problem.compare == "lines" else problem.names,
                       segment=problem.segment)
-        own.set_compare(problem.compare)
+        own.set_compare(problem.compare, problem.names)
     except (SimulationError, ValueError):
         return {}
     out = own.nmse(p)
@@ -125,8 +126,8 @@ def unexplained_channels(problem: Problem, p: JointParams, fps: list[FitParam],
 
 def curve_unexplained(judged: Problem, p: JointParams, candidates: list[dict], min_score: float,
                       factor: float) -> dict[str, str]:
-    """The spring curve left unexplained (``{"spring:<channel>": why}``) when nothing on it
-    was named.
+    """The spring curve or the line channels left unexplained (``{"<view>:<channel>":
+    why}``) when nothing on them was named.
 
     Only when an effect the curve reveals is missing and explains at least ``min_score``
     of it in a linearized refit (``candidates``, best first): a curve above ``factor`` x its
@@ -142,10 +143,12 @@ def curve_unexplained(judged: Problem, p: JointParams, candidates: list[dict], m
     for k in judged.names:
         level = max(floor.get(k, 0.0), judged.noise[k])
         if final[k] > factor * level:
-            out[f"spring:{k}"] = (
-                f"the spring curve ({k} over bins of the measured torque and its direction): "
+            out[f"{judged.compare}:{k}"] = (
+                (f"the spring curve ({k} over bins of the measured torque and its direction): "
+                 if judged.compare == "spring" else
+                 f"the line channel {k} (line amplitudes at orders of the WG angle): ") +
                 f"NMSE {final[k]:.3g} %, above {factor:g} x its noise level {level:.2g} % (the "
-                f"larger of the noise of its bin means and what the model refitted on it shows "
+                f"larger of its measurement noise and what the model refitted on it shows "
                 f"on a record it made itself); {candidates[0]['name']} explains "
                 f"{100 * candidates[0]['score']:.0f} % of it in a linearized refit but is not "
                 f"worth adding")

@@ -267,7 +267,8 @@ FRICTION_EFFECTS: tuple[Effect, ...] = (
            "position-dependent friction: friction ripple at orders of the WG (and output) angle",
            _posdep_params, _posdep_on, _posdep_neutral, requires=("coulomb_friction",),
            seen=(FREE, MOVING, TURNS), channels="speed (or current) lines at orders of the WG "
-           "angle; the speed over an output turn", protocol="slow_constant_speed"),
+           "angle; the speed over an output turn", protocol="slow_constant_speed",
+           compare=("time", "lines")),
     Effect("load_dependent_friction", "torque_dependence",
            "load-dependent tooth friction: friction grows with the transmitted torque",
            _load_params, _load_on, _load_neutral, requires=("coulomb_friction",),

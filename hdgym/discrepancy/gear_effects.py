@@ -163,7 +163,8 @@ GEAR_EFFECTS: tuple[Effect, ...] = (
            # over a part turn its lines alias into each other and into any smooth function
            # of the angle (in a back-and-forth motion, of time): a given model's are kept
            refit=(TURNS,),
-           channels="transmission_error against the WG angle", protocol="slow_constant_speed"),
+           channels="transmission_error against the WG angle", protocol="slow_constant_speed",
+           compare=("time", "lines")),
     Effect("nonlinear_stiffness", "cubic_torsion",
            "hardening flexspline spring: residual cubic in the torsion",
            _nl_params, _nl_on, _nl_neutral, seen=(SIMULATED, TORSION, HIGH_TORQUE),

@@ -206,7 +206,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     Both runs of the case's command are simulated without sensor noise, with and without
     the hidden effect (its switch off); the change of the comparison channels is an NMSE,
     percent, mean over channels, against the measured record's variance, beside the
-    record's measurement-noise NMSE (:func:`.residuals.noise_nmse`).
+    record's measurement-noise NMSE (:func:`.noise.noise_nmse`).
     """
     from . import residuals as R
     from .problem import Problem
@@ -240,7 +240,7 @@ class Result:
     (:func:`.truth.truth_nmse`: the floor no model goes below); ``floor``: the workflow's own
     estimate of it (:func:`.truth.floor_estimate`); ``noise_true`` and ``noise_est``: the
     validation record's sensor noise per channel and its mean (:func:`.truth.true_noise_nmse`)
-    and what :func:`.residuals.noise_nmse` estimates from the record, NMSE percent.
+    and what :func:`.noise.noise_nmse` estimates from the record, NMSE percent.
     """
 
     case: Blind
@@ -328,8 +328,8 @@ def table(results: list[Result]) -> str:
         size = (f"{r.size:.2g} ({r.noise:.2g})" + ("" if r.present or r.case.hidden is None
                                                     else ": not present"))
         found = ", ".join(d.missing_effects) or "none"
-        if d.compare == "spring":  # before and after are NMSE of the spring curve
-            found += " (spring curve)"
+        if d.compare in ("spring", "lines"):  # before and after are NMSE of that view
+            found += " (spring curve)" if d.compare == "spring" else " (line channels)"
         gap = "-" if math.isnan(r.gap_cut) else f"{100 * r.gap_cut:.0f} %"
         lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
                      f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {r.truth:.3g} "
@@ -357,7 +357,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
     53 full-preset diagnoses in one page run); ``quick`` runs the blind cases only; ``jobs``
     worker processes (:func:`.pool.ordered_map`).
     """
-    from .outcome import NOISE_FACTOR, RESOLVED
+    from .outcome import FLOOR_FACTOR, NOISE_FACTOR, RESOLVED
 
     parts = ["", "## Blind and hold-out cases (never used for tuning)", "",
              "Made by `hdgym.discrepancy.holdout` (run here by the same command): full presets "
@@ -380,14 +380,16 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "\"unexplained\"); the summary also counts the hits by the raw cut. A "
              "miss is "
              "*honest* when the outcome says \"unexplained\" or the hidden effect is listed "
-             "as untestable on the record. Outcomes: *named*; *nothing missing* when the final "
-             f"NMSE is within {NOISE_FACTOR:g} x the measurement-noise NMSE, or at most "
-             f"{RESOLVED:g} % "
-             "(`hdgym.discrepancy.outcome.NOISE_FACTOR`, `RESOLVED`, set on the tuned cases); "
-             "*unexplained* otherwise, or when one channel alone is above 3 x what the fitted "
-             "model shows on a record it made itself and beyond what its fitted parameters "
-             "can change it (`hdgym.discrepancy.floor`) (*named; rest unexplained* when an "
-             "effect was named but what remains is above that level). On a locked output "
+             "as untestable on the record. Outcomes: *named* when the final NMSE is within "
+             f"{FLOOR_FACTOR:g} x what the final model shows on a record it made itself (its "
+             "own floor, `hdgym.discrepancy.floor.floor_nmse`, mean over channels; "
+             "`hdgym.discrepancy.outcome.FLOOR_FACTOR`), else *named; rest unexplained*; with "
+             "nothing named, *nothing missing* when the final NMSE is within "
+             f"{NOISE_FACTOR:g} x the measurement-noise NMSE (`hdgym.discrepancy.noise`), or "
+             f"at most {RESOLVED:g} % (`NOISE_FACTOR`, `RESOLVED`, set on the tuned cases), "
+             "else *unexplained*; either is *unexplained* also when one channel alone is above "
+             "3 x its floor and beyond what the fitted parameters can change it "
+             "(`hdgym.discrepancy.floor`). On a locked output "
              "whose time channels show nothing, the spring curve (motor angle over bins of "
              "the measured torque and its direction, one run; `hdgym.discrepancy.spring`) is "
              "searched for the spring's effects; a case found there reports before and after "

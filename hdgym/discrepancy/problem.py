@@ -31,12 +31,14 @@ from hdgym.physics import layout as L
 from hdgym.record import Record
 from hdgym.sim import SimulationError, Simulator
 
+from . import orders as O
 from . import residuals as R
 from . import spring as S
 from .effect import Scales
 from .inverse import InverseComparison
+from .noise import noise_nmse
 from .record_scales import RecordScales
-from .restarts import Restarts
+from .restarts import Restarts, shifted
 
 BAD = 10.0  # residual per sample (in channel sigmas) of a run that diverged
 
@@ -154,8 +156,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
             self.mask = ~excluded if self.mask is None else self.mask & ~excluded
         self.sigma2 = {k: max(float(np.var(self._m(v))), 1e-300)
                        for k, v in self.measured.items()}
-        self.noise = R.noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
-                                  {k: self._m(v) for k, v in self.measured.items()})
+        self.noise = noise_nmse(raw, self.names, self.ratio, self.dt, self.cutoff,
+                                {k: self._m(v) for k, v in self.measured.items()}, self.counts)
         self.noise_time = self.noise
         self.context = self._context()
         self.scales = self._scales()
@@ -168,23 +170,61 @@ class Problem(Restarts, InverseComparison, RecordScales):
     compare: str = field(init=False, default="time")
     """``"time"``: the channels sample by sample; ``"spring"``: the motor angle's residual
     averaged over bins of the measured torque and its direction, simulated in one run
-    (:mod:`.spring`, locked output; :meth:`set_compare`)."""
+    (:mod:`.spring`, locked output); ``"lines"``: line coefficients at orders of each run's
+    own WG angle (:mod:`.orders`, free output; :meth:`set_compare`)."""
 
-    def set_compare(self, compare: str) -> None:
-        """Compare sample by sample (``"time"``) or on the spring curve (``"spring"``)."""
-        if compare not in ("time", "spring"):
-            raise ValueError(f"compare must be time or spring, got {compare!r}")
+    @property
+    def time_names(self) -> tuple[str, ...]:
+        """The time channels (:attr:`names` while comparing in time)."""
+        return self.names if self.compare == "time" else self._time_view[0]
+
+    def like(self, record: Record, params: JointParams) -> Problem:
+        """A comparison of ``record`` with the same mode, cutoff, channels and horizon (and on
+        the same line channels; a spring curve's channel is compared in time)."""
+        lines = self.compare == "lines"
+        out = Problem(record, params, mode=self.mode, cutoff=self.cutoff,
+                      channels=self.time_names if lines else self.names, segment=self.segment)
+        if lines:
+            out.set_compare("lines", self.names)
+        return out
+
+    def line_channels(self, names: tuple[str, ...] | None = None) -> O.Lines | None:
+        """The record's line channels (:class:`.orders.Lines`; ``names``: exactly these, None:
+        those worth comparing), or None when it has none (locked, closed-loop)."""
+        if self.locked or self.inverse or self.raw.output_angle is None:
+            return None
+        if getattr(self, "_lines", None) is None or names is not None:
+            self._lines = O.Lines(self.raw.motor_angle, self.raw.output_angle, self.ratio,
+                                  self.dt, self.cutoff, self.x_moving, self.counts, names)
+        return self._lines if self._lines.names else None
+
+    def set_compare(self, compare: str, names: tuple[str, ...] | None = None) -> None:
+        """Compare sample by sample (``"time"``), on the spring curve (``"spring"``) or on
+        the line channels (``"lines"``; ``names``: exactly these, as the training record's)."""
+        if compare not in ("time", "spring", "lines"):
+            raise ValueError(f"compare must be time, spring or lines, got {compare!r}")
         if compare == self.compare:
             return
+        if compare != "time" and self.compare != "time":
+            self.set_compare("time")
+        if compare == "lines" and self.line_channels(names) is None:
+            raise ValueError(f"{self.record.source}: no line channels to compare")
         self.compare = compare
         self.scales = replace(self.scales, spring=compare == "spring")
         if compare == "time":
             self.noise = self.noise_time
             self.names, self.segment = self._time_view
             return
+        self._time_view = (self.names, self.segment)
+        if compare == "lines":
+            lines = self._lines
+            self.names = lines.names
+            self.sigma2.update({k: lines.sigma2(k) for k in lines.names})
+            self.noise = {k: lines.noise_nmse(k) for k in lines.names}
+            self.noise["mean"] = float(np.mean([self.noise[k] for k in lines.names]))
+            return
         # the curve is the motor angle (ratio x torsion) against the torque, over one run:
         # a locked joint cannot drift, and restarts would put their own errors into it
-        self._time_view = (self.names, self.segment)
         self.names = tuple(k for k in self.names if k == "motor_angle")
         self.segment = 0.0
         c = self.masked_context()
@@ -228,9 +268,12 @@ class Problem(Restarts, InverseComparison, RecordScales):
     # -- model output
 
     def predict(self, p: JointParams) -> dict[str, np.ndarray]:
-        """The model's filtered channels for this record (raises SimulationError)."""
+        """The model's filtered channels for this record, or on the line channels its line
+        coefficients (raises SimulationError)."""
         if self.inverse:
             return {"motor_current": self._inverse(p)}
+        if self.compare == "lines":
+            return self._predict_lines(p)
         p = with_sample_time(p, self.dt)
         sim = Simulator(p, locked_output=self.locked, sensors=False)
         x0 = sim.initial_state(float(self.raw.motor_angle[0]))
@@ -274,6 +317,36 @@ class Problem(Restarts, InverseComparison, RecordScales):
                     output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
         return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
 
+    def _predict_lines(self, p: JointParams) -> dict[str, np.ndarray]:
+        """The model's line coefficients (:mod:`.orders`), run window by window.
+
+        At each window's end only the model's slow drift from the measured motor angle is
+        removed (:func:`.orders.drift`, :func:`.restarts.shifted`); the model is never put
+        onto the filtered measured state, so its lines stay its own and no restart error
+        rings into them. Each window's lines are taken against the model's own WG angle.
+        """
+        lines = self._lines
+        p = with_sample_time(p, self.dt)
+        sim = Simulator(p, locked_output=False, sensors=False)
+        row, ke_on = L.pack(p), "kinematic_error" in p.effects
+        x = sim.initial_state(float(self.raw.motor_angle[0]))
+        n = self.u.size
+        wins = lines.wins
+        th = np.empty(int(wins[-1, 1]))
+        out = np.empty(th.size)
+        for a, b in wins:
+            e = min(b + 1, n)
+            _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x)
+            th[a:b], out[a:b] = part[: b - a, L.TH_M], part[: b - a, L.TH_O]
+            if e > b:
+                h = (b - a) // 2
+                d_angle, d_speed = O.drift(self.x_rest_angle[b - h:b + 1],
+                                           part[b - a - h:b - a + 1, L.TH_M], self.dt)
+                x = shifted(part[b - a], row, ke_on, self.ratio, d_angle, d_speed)
+        mc, oc = self.counts
+        return O.channel_lines(R.quantize(th, mc), R.quantize(out, oc), self.ratio, self.dt,
+                               self.cutoff, wins, self.names)
+
     def choose_horizon(self, p: JointParams, horizons: tuple[float, ...] = HORIZONS) -> float:
         """Set and return the prediction horizon (s) for this record, from the record.
 
@@ -299,6 +372,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
     def residuals(self, p: JointParams) -> dict[str, np.ndarray]:
         """Model minus measurement, per channel (masked samples dropped in inverse mode)."""
         pred = self.predict(p)
+        if self.compare == "lines":
+            return {k: pred[k] - self._lines.measured[k] for k in self.names}
         res = {k: self._m(pred[k] - self.measured[k]) for k in self.names}
         if self.compare == "spring":
             res = {k: S.project(r, self.spring_bins) for k, r in res.items()}
@@ -319,11 +394,13 @@ class Problem(Restarts, InverseComparison, RecordScales):
         try:
             res = self.residuals(p)
         except (SimulationError, FloatingPointError):
-            n = sum(self._m(self.measured[k])[::decimate].size for k in self.names)
+            n = (sum(self._lines.measured[k].size for k in self.names)
+                 if self.compare == "lines"
+                 else sum(self._m(self.measured[k])[::decimate].size for k in self.names))
             return np.full(n, BAD)
         parts = []
         for k, r in res.items():
-            r = r[::decimate]
+            r = r if self.compare == "lines" else r[::decimate]
             parts.append(r / math.sqrt(self.sigma2[k] * r.size))
         v = np.concatenate(parts)
         return np.where(np.isfinite(v), v, BAD)

@@ -130,7 +130,8 @@ def rank_candidates(problem: Problem, current: JointParams,
             continue
         if any(req not in current.effects for req in eff.requires):
             continue
-        sig = R.signature(eff.signature, res, w, ctx)
+        sig = (R.signature(eff.signature, res, w, ctx) if problem.compare != "lines"
+               else {"kind": eff.signature, "explained": 0.0})  # (coefficients: no samples)
         sens = 0.0
         size = math.nan
         nstart = None

@@ -243,7 +243,9 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
         f"Comparison: {js['mode']} mode"
         + (f" (prediction horizon {js['horizon_s']:g} s)" if js.get("horizon_s") else "")
         + (" on the spring curve (motor angle over bins of the measured torque and its "
-           "direction, one run)" if js.get("compare") == "spring" else "")
+           "direction, one run)" if js.get("compare") == "spring" else
+           " on the line channels (line amplitudes at orders of each run's own WG angle, "
+           "window by window)" if js.get("compare") == "lines" else "")
         + f", channels {', '.join(js['channels'])}; base model "
         f"effects: {', '.join(js['base_effects']) or 'none'}.",
         "",

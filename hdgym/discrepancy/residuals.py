@@ -105,34 +105,6 @@ def channels(raw: Raw, names: tuple[str, ...], ratio: float, dt: float,
     return {name: np.ascontiguousarray(filt[:, k]) for k, name in enumerate(names)}
 
 
-def noise_nmse(raw: Raw, names: tuple[str, ...], ratio: float, dt: float, cutoff: float,
-               measured: Mapping[str, np.ndarray]) -> dict[str, float]:
-    """Measurement-noise level of each filtered channel, as an NMSE in percent.
-
-    The white-noise variance of the unfiltered channel is estimated from its first
-    differences (``var(diff)/2``), scaled by the share of the band the filter keeps
-    (``2 cutoff dt``), and divided by the variance of the filtered measured channel: the
-    NMSE a perfect model would still show against this record.
-    """
-    out = {}
-    for name in names:
-        if name == "motor_speed":
-            x = np.gradient(raw.motor_angle, dt)
-        elif name == "motor_angle":
-            x = raw.motor_angle
-        elif name == "transmission_error":
-            x = raw.output_angle - raw.motor_angle / ratio
-        elif name == "output_torque":
-            x = raw.output_torque
-        else:
-            x = raw.motor_current
-        noise = float(np.var(np.diff(np.asarray(x, dtype=float)))) / 2.0 * min(1.0,
-                                                                               2 * cutoff * dt)
-        out[name] = 100.0 * noise / max(float(np.var(measured[name])), 1e-300)
-    out["mean"] = float(np.mean([out[k] for k in names])) if names else 0.0
-    return out
-
-
 def pick_channels(raw: Raw, locked: bool, ratio: float, dt: float, cutoff: float,
                   motor_counts: float | None, output_counts: float | None,
                   inverse: bool = False) -> tuple[str, ...]:

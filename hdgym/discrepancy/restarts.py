@@ -94,6 +94,37 @@ def held_torsion(torque: float, x: np.ndarray, row: np.ndarray, flags: int) -> f
 
 
 
+def ke_at(row: np.ndarray, th: float, on: bool) -> tuple[float, float]:
+    """Kinematic error (output rad) and its slope in the WG angle at WG angle ``th``, rad
+    (``row``: packed parameters; ``on``: the effect is on)."""
+    if not on:
+        return 0.0, 0.0
+    v = d = 0.0
+    for j in range(int(row[L.NKE])):
+        a = row[L.KE_ORD + j] * th + row[L.KE_PH + j]
+        v += row[L.KE_AMP + j] * math.sin(a)
+        d += row[L.KE_AMP + j] * row[L.KE_ORD + j] * math.cos(a)
+    return v, d
+
+
+def shifted(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, d_angle: float,
+            d_speed: float) -> np.ndarray:
+    """Sim state ``x`` with the motor angle moved by ``d_angle`` (rad) and the motor speed by
+    ``d_speed`` (rad/s), the torsion, its rate and the rest kept (the output follows)."""
+    x = x.copy()
+    r = ratio
+    k0, d0 = ke_at(row, x[L.TH_M], ke_on)
+    tors = x[L.TH_M] / r - x[L.TH_O] - k0
+    rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
+    x[L.TH_M] += d_angle
+    x[L.W_M] += d_speed
+    k1, d1 = ke_at(row, x[L.TH_M], ke_on)
+    x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+    x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
+    x[L.DTH] = tors
+    return x
+
+
 class Restarts:
     """The multiple-shooting part of :class:`.problem.Problem` (uses its record arrays)."""
 
@@ -172,14 +203,7 @@ class Restarts:
         ke_on = "kinematic_error" in p.effects
 
         def ke(th: float) -> tuple[float, float]:
-            if not ke_on:
-                return 0.0, 0.0
-            v = d = 0.0
-            for j in range(int(row[L.NKE])):
-                a = row[L.KE_ORD + j] * th + row[L.KE_PH + j]
-                v += row[L.KE_AMP + j] * math.sin(a)
-                d += row[L.KE_AMP + j] * row[L.KE_ORD + j] * math.cos(a)
-            return v, d
+            return ke_at(row, th, ke_on)
 
         k0, d0 = ke(x[L.TH_M])
         tors = x[L.TH_M] / r - x[L.TH_O] - k0

@@ -1,10 +1,12 @@
-"""The workflow's search on the spring curve of a locked-output record (:mod:`.spring`).
+"""The workflow's search on another comparison than the time channels' (:func:`search_view`).
 
-The base fit's linear stiffness absorbs a hardening spring to below the time channels'
-noise; over bins of the measured torque (and its direction) the noise goes and the bend
-stays. :func:`search_spring` refits the base model on the curve, then ranks and tries the
-effects the curve reveals (:attr:`.effect.Effect.compare`) with the workflow's own search
-(:func:`.workflow._search`, passed in).
+The spring curve of a locked-output record (:mod:`.spring`): the base fit's linear
+stiffness absorbs a hardening spring to below the time channels' noise; over bins of the
+measured torque (and its direction) the noise goes and the bend stays. The line channels
+of a free-output record (:mod:`.orders`): lines above the time channels' filter cutoff,
+at orders of each run's own WG angle. :func:`search_view` refits the base model on the
+comparison, then ranks and tries the effects it reveals (:attr:`.effect.Effect.compare`)
+with the workflow's own search (:func:`.workflow._search`, passed in).
 """
 
 from __future__ import annotations
@@ -17,18 +19,34 @@ from .fitting import FitResult, fit, rescored
 from .floor import curve_unexplained
 from .outcome import NOISE_FACTOR
 from .problem import Problem
-from .registry import model_params
+from .registry import REGISTRY, model_params
 
 
-def search_spring(problem: Problem, vprob: Problem | None, current: FitResult,
-                  given: JointParams, nfev: int, min_score: float,
-                  search: Callable[[FitResult], tuple[tuple | None, str, list[dict]]]
-                  ) -> tuple[tuple | None, list[dict], FitResult, dict[str, str]]:
-    """Search the spring curve when the time channels of a locked record show nothing.
+def views(problem: Problem, p: JointParams) -> tuple[str, ...]:
+    """The comparisons :func:`search_view` can search on ``problem``'s record with model
+    ``p``: the spring curve on a locked output; the line channels where the record has them
+    (:meth:`.problem.Problem.line_channels`) and an effect they reveal is missing from ``p``
+    and testable."""
+    if problem.inverse or problem.compare != "time":
+        return ()
+    if problem.locked:
+        return ("spring",)
+    missing = [n for n, e in REGISTRY.items() if "lines" in e.compare
+               and n not in p.effects and e.testable(problem.scales)]
+    return ("lines",) if missing and problem.line_channels() is not None else ()
+
+
+def search_view(problem: Problem, vprob: Problem | None, current: FitResult,
+                given: JointParams, nfev: int, min_score: float,
+                search: Callable[[FitResult], tuple[tuple | None, str, list[dict]]],
+                view: str = "spring"
+                ) -> tuple[tuple | None, list[dict], FitResult, dict[str, str]]:
+    """Search another comparison when the time channels show nothing.
 
     Args:
-        problem, vprob: the training and validation comparisons (switched to the curve,
-            :meth:`.problem.Problem.set_compare`, and back when nothing is found).
+        problem, vprob: the training and validation comparisons (switched to ``view``,
+            :meth:`.problem.Problem.set_compare`, and back when nothing is found; the
+            validation record compares the training record's line channels).
         current: the base fit; given: the base model as given (anchors the refit).
         nfev: least-squares evaluations of the base refit on the curve.
         min_score: least share of the curve's residual a missing effect must explain for
@@ -36,15 +54,22 @@ def search_spring(problem: Problem, vprob: Problem | None, current: FitResult,
         search: one round of the workflow's search from a fit (``_search`` with the
             escalated validation cut: an effect found on the curve must cut its mean
             validation NMSE by 80 % and by :data:`.outcome.NOISE_FACTOR` x its noise).
+        view: ``"spring"`` or ``"lines"`` (:func:`views`).
 
     Returns ``(accepted, candidates, base refit on the curve, unexplained)``: ``accepted``
     as the search's (None: nothing found, the comparisons are back on the time channels;
-    else the diagnosis stays on the curve) and ``unexplained`` from
+    else the diagnosis stays on ``view``) and ``unexplained`` from
     :func:`.floor.curve_unexplained` when nothing was found.
     """
     probs = [problem] + ([vprob] if vprob is not None else [])
-    for pr in probs:
-        pr.set_compare("spring")
+    try:
+        problem.set_compare(view)
+        if vprob is not None:
+            vprob.set_compare(view, problem.names)
+    except ValueError:  # the validation record has none of the training record's lines
+        for pr in probs:
+            pr.set_compare("time")
+        return None, [], current, {}
     cur = rescored(problem, current)
     refit = fit(problem, cur.params, model_params(cur.params, problem.scales, given),
                 max_nfev=nfev)

@@ -10,7 +10,7 @@ what the restarts from the filtered measured state cost. A diagnosis closes at m
 Known only for generated cases; the workflow's own outcome estimates that floor without the
 truth (:func:`.floor.floor_nmse`). :func:`true_noise_nmse` measures the record's sensor noise
 alone (the measured channels against the same run's true states), the number
-:func:`.residuals.noise_nmse` estimates from the record.
+:func:`.noise.noise_nmse` estimates from the record.
 """
 
 from __future__ import annotations

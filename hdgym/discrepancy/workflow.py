@@ -52,7 +52,7 @@ from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
 from .settle import settle
-from .spring_search import search_spring
+from .spring_search import search_view, views
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -359,14 +359,15 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
             if found is not None:
                 accepted, candidates, current = found
                 escalated = True
-        if (accepted is None and auto and not problem.inverse and not steps
-                and problem.locked and problem.compare == "time"):  # then the spring curve
-            found_s, cands_s, on_curve, spring_stuck = search_spring(
+        for view in views(problem, current.params) if accepted is None and auto and not steps \
+                else ():  # then the spring curve (locked output) or the line channels
+            found_s, cands_s, on_curve, spring_stuck = search_view(
                 problem, vprob, current, params, nfev_trial, MIN_SCORE, lambda cur: _search(
                     problem, vprob, cur, params, base_paths, threshold, nfev_trial,
-                    nfev_polish, ESCALATED_GAIN))
+                    nfev_polish, ESCALATED_GAIN, True), view)
             untestable_why = {n: w for n, w in untestable_why.items()  # compared on the curve
-                              if not REGISTRY[n].testable(replace(problem.scales, spring=True))}
+                              if not REGISTRY[n].testable(replace(problem.scales,
+                                                                  spring=view == "spring"))}
             if found_s is not None:
                 accepted, candidates, current, before = found_s, cands_s, on_curve, on_curve
                 escalated = True
@@ -455,12 +456,12 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
 
 def _full_nmse(record: Record, params: JointParams, problem: Problem,
                p: JointParams) -> dict[str, float]:
-    full = Problem(record, params, mode=problem.mode, cutoff=problem.cutoff,
-                   channels=problem.names, segment=problem.segment)
-    return full.nmse(p)
+    return problem.like(record, params).nmse(p)
 
 
 def _where(problem: Problem, p: JointParams) -> dict:
+    if problem.compare == "lines":  # coefficients, not samples: nothing to localize in time
+        return {}
     res = problem.residuals(p)
     _, w = _weighted(problem, res)
     return R.localize(res, w, problem.masked_context())

@@ -215,6 +215,8 @@ class JointBatch:
         self.zeros2 = np.zeros((n, 2))
         self.noise_buf = np.zeros((n, NOISE_BLOCK, 2))
         self.noise_ptr = np.full(n, NOISE_BLOCK)  # per env: envs can restart mid-step
+        #: samples every env still has in its block (0: unknown, look before using one)
+        self.noise_left = 0
         self._all = np.arange(n)
         self.rngs: list[np.random.Generator] = [np.random.default_rng() for _ in range(n)]
         # noise is drawn per env by this class (see module docstring), not by the bank
@@ -235,6 +237,7 @@ class JointBatch:
         self.rngs = list(rngs)
         if reseeded:
             self.noise_ptr[:] = NOISE_BLOCK
+            self.noise_left = 0
 
     def _draw_episode(self, i: int) -> float:
         rng = self.rngs[i]
@@ -254,10 +257,24 @@ class JointBatch:
         for j, i in enumerate(idx):
             self.tp[i] = self.task.draw(self.rngs[int(i)], float(x0[j, L.TH_O]), self.horizon)
 
+    def refill_noise(self) -> None:
+        """Make sure every env has a noise sample left: a new block for the envs whose
+        block is used up, from their own generators. Callers that take samples without
+        :meth:`_noise` (the vector env's compiled step) lower :attr:`noise_left` by one
+        per sample each env takes."""
+        if not self.noise or self.noise_left > 0:
+            return
+        ptr = self.noise_ptr
+        for i in np.flatnonzero(ptr >= NOISE_BLOCK):
+            self.rngs[i].standard_normal((NOISE_BLOCK, 2), out=self.noise_buf[i])
+            ptr[i] = 0
+        self.noise_left = NOISE_BLOCK - int(ptr.max())
+
     def _noise(self, idx: np.ndarray | None = None) -> np.ndarray:
         """The next noise sample ``(len(idx), 2)`` of envs ``idx`` (all by default)."""
         if not self.noise:
             return self.zeros2 if idx is None else np.zeros((len(idx), 2))
+        self.noise_left = 0  # the pointers move here: refill_noise looks again
         ptr = self.noise_ptr
         if idx is None and ptr[0] < NOISE_BLOCK and (ptr == ptr[0]).all():
             # the usual step: every env at the same sample, so a view does

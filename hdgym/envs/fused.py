@@ -16,8 +16,8 @@ The numbers are those of the composed step, bit for bit (the same compiled
 functions in the same order per env; ``tests/test_envs.py`` holds the vector
 env to single envs, which step through the composed path). Random numbers
 are not drawn here: the caller refills the per-env noise blocks from the
-envs' own generators before the call (``HarmonicDriveVectorEnv._refill_noise``, in
-the order :meth:`JointBatch.advance` draws: a new episode's draws first).
+envs' own generators before the call (:meth:`JointBatch.refill_noise`, in the
+order :meth:`JointBatch.advance` draws: a new episode's draws first).
 
 Phases (``phase``): 0 the whole step; 1 only actions, physics, sensors and
 the step count (the envs that start a new episode are then reset from

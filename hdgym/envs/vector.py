@@ -39,7 +39,6 @@ from gymnasium.vector.utils import batch_space
 
 from hdgym.envs.common import (
     INFO_STATES,
-    NOISE_BLOCK,
     JointBatch,
     action_space,
     observation_space,
@@ -117,7 +116,6 @@ class HarmonicDriveVectorEnv(VectorEnv):
         self._meas = np.zeros((6, n))
         self._z = np.zeros((n, 2))
         self._n_done = 0  # envs in prev_done
-        self._noise_left = 0  # steps before some env's noise block runs out (0: look)
         self._info_names = (*INFO_STATES, "time", *task.aux_names)
         assert len(INFO_STATES) + 1 == N_INFO_FIXED
         self._masks = {"_" + k: self._mask for k in (*self._info_names, "diverged")}
@@ -158,19 +156,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
         self.batch.reset_all()
         self.prev_done = np.zeros(n, dtype=np.bool_)
         self._n_done = 0
-        self._noise_left = 0
         return self.batch.obs.copy(), self._info()
-
-    def _refill_noise(self) -> None:
-        """Draw a new noise block for the envs whose block is used up (their own generators)."""
-        b = self.batch
-        if not b.noise or self._noise_left > 0:
-            return
-        ptr = b.noise_ptr
-        for i in np.flatnonzero(ptr >= NOISE_BLOCK):
-            b.rngs[i].standard_normal((NOISE_BLOCK, 2), out=b.noise_buf[i])
-            ptr[i] = 0
-        self._noise_left = NOISE_BLOCK - int(ptr.max())
 
     def _fused(self, phase: int, a: np.ndarray, fresh: np.ndarray,
                out: tuple[np.ndarray, ...]) -> tuple[int, int]:
@@ -179,7 +165,7 @@ class HarmonicDriveVectorEnv(VectorEnv):
         obs, rew, term, trunc, done, inf = out
         limit = math.inf if self.max_episode_steps is None else self.max_episode_steps
         if phase != 1:
-            self._noise_left -= 1
+            b.noise_left -= 1  # each env takes one noise sample
         return vector_step(b.lanes.parallel, phase, self._task_id, a, self._imax, b.lanes.W,
                            b.n_substeps, b.xs, b.bad, b.i_cmd, b.t_ext, b.act, bank._steps,
                            bank._prev, bank._held, bank.torque_sensor, bank.delay, self._meas,
@@ -211,10 +197,10 @@ class HarmonicDriveVectorEnv(VectorEnv):
             fresh = self.prev_done
             self._fused(1, a, fresh, out)
             b.reset_envs(np.flatnonzero(fresh))
-            self._refill_noise()
+            b.refill_noise()
             n_bad, n_end = self._fused(2, a, fresh, out)
         else:
-            self._refill_noise()
+            b.refill_noise()
             n_bad, n_end = self._fused(0, a, b.no_fresh, out)
         b.obs, b.rew, b.term = obs, rew, term
         if n_bad:  # as JointBatch.true_states: no NaN in info
@@ -228,7 +214,6 @@ class HarmonicDriveVectorEnv(VectorEnv):
         elif n_end:  # SAME_STEP: the ended envs start over within this step
             final_obs = obs.copy()
             b.restart(done)
-            self._noise_left = 0
             final_info = info
             info = self._info()
             info["final_obs"], info["_final_obs"] = final_obs, done

@@ -111,8 +111,7 @@ def check_eq14(out: Path, quick: bool) -> Item:
         ez, ew = fit.zeta / z_p - 1, fit.omega_n / w_p - 1
         passage = "§4.2 eq. 14, fit to fig. 21 in the resonance region"
         good = item.check(f"RH-32 {amp:g} A: ζ", passage, f"{z_p}", f"±{ZETA_TOL:.0%}",
-                          f"{fit.zeta:.3f} ({100 * ez:+.0f} %)",
-                          within(fit.zeta, z_p, ZETA_TOL))
+                          f"{fit.zeta:.3f} ({100 * ez:+.0f} %)", within(fit.zeta, z_p, ZETA_TOL))
         good &= item.check(f"RH-32 {amp:g} A: ω_n", passage, f"{w_p} rad/s", f"±{OMEGA_TOL:.0%}",
                            f"{fit.omega_n:.1f} rad/s ({100 * ew:+.0f} %)",
                            within(fit.omega_n, w_p, OMEGA_TOL))
