@@ -42,3 +42,30 @@ def test_spring_curve_polish_uses_the_coarse_step(monkeypatch, compare):
     assert accepted is not None
     assert calls and calls[-1]["search"] is True
     assert calls[-1]["coarse"] is (compare == "spring")
+
+
+def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
+    """A candidate that passes every check but the cut asked at an escalated horizon keeps
+    that cut (``escalated_cut``): the diagnosis then does not call the residual slack
+    (:func:`hdgym.discrepancy.settle.settle`, ``both``)."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+    trial = FitResult(p, {}, {"mean": 0.4}, 0, 0.4)
+    cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.6}
+    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
+    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
+    monkeypatch.setattr(W, "fit", lambda *a, **k: trial)
+
+    vals = iter([{"x": 1.0, "mean": 1.0}, {"x": 0.45, "mean": 0.45}])
+
+    class _Val:
+        names = ("x",)
+
+        def nmse(self, q):
+            return next(vals)
+
+    accepted, why, _ = W._search(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20,
+                                 mean_gain=0.8)
+    assert accepted is None and "needs 80 %" in why
+    assert cand["escalated_cut"] == pytest.approx(0.55)

@@ -91,3 +91,18 @@ def test_settle_refits_on_both_records_when_training_does_not_pin_the_parameters
     missing = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]], c=[0.0, 0.0, 3.0])
     out, why = S.settle(train, missing, cur, truth, 20, False, "")
     assert missing.nmse(out.params)["mean"] >= 100 * 3.0**2
+
+
+def test_settle_leaves_the_validation_record_alone_when_a_candidate_explained_part(
+        monkeypatch):
+    """With ``both`` False (a candidate passed every check of the search but the cut asked
+    at an escalated horizon) the residual is partly an effect's: no refit on both records."""
+    truth = preset("tuttle-joint3")
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    val = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])
+    p0 = _start(truth, 1.04, 0.96)
+    cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
+    out, why = S.settle(train, val, cur, truth, 20, False, "", both=False)
+    assert val.nmse(out.params)["mean"] == pytest.approx(val.nmse(p0)["mean"], rel=0.05)
+    assert "together" not in why

@@ -214,6 +214,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
             cut = 1.0 - v_new["mean"] / v_now["mean"] if v_now["mean"] > 0 else 0.0
             why = FF.short_of(vprob, current.params, polished.params, best, cut, mean_gain)
             if why:  # short of the escalated cut (friction may pass on its features)
+                best["escalated_cut"] = round(cut, 4)  # partial evidence (see settle)
                 reasons.append(why)
                 continue
         accepted = (best, polished, rel)
@@ -224,8 +225,8 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
 
 
 def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
-              base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int
-              ) -> tuple[tuple, list[dict], FitResult] | None:
+              base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int,
+              seen: list[dict] | None = None) -> tuple[tuple, list[dict], FitResult] | None:
     """Search again at other horizons when the base model shows nothing at the chosen one.
 
     The horizon is chosen with the base model (:meth:`.problem.Problem.choose_horizon`),
@@ -264,6 +265,8 @@ def _escalate(problem: Problem, vprob: Problem | None, current: FitResult, given
         cur = rescored(problem, current)
         accepted, _, candidates = _search(problem, vprob, cur, given, base_paths, threshold,
                                           nfev_trial, nfev_polish, ESCALATED_GAIN, True)
+        if seen is not None:  # ``seen``: every horizon's candidates
+            seen.extend(candidates)
         if accepted is not None:
             return accepted, candidates, cur
     problem.segment = h0
@@ -336,6 +339,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     spring_stuck: dict[str, str] = {}
     conclusion = ""
     candidates: list[dict] = []
+    seen: list[dict] = []  # candidates of the escalated horizons
     for _ in range(max_steps):
         prog.set_postfix_str(f"{len(steps)} effect(s) added", refresh=False)
         # control refit: the same iteration budget without a new effect, so a candidate is
@@ -355,7 +359,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
             # friction ripple over an output turn, a slow speed change) shows as the drift
             # that made the short horizon the choice; look where the current model drifts
             found = _escalate(problem, vprob, current, params, base_paths, threshold,
-                              nfev_trial, nfev_polish)
+                              nfev_trial, nfev_polish, seen)
             if found is not None:
                 accepted, candidates, current = found
                 escalated = True
@@ -410,8 +414,11 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     else:
         conclusion = f"stopped after {max_steps} effects (the most one diagnosis adds)"
     if not steps:
+        # a candidate that passed every check but the escalated cut explains part of the
+        # residual: no refit on both records may then call the rest slack
+        partly = [c["name"] for c in seen + candidates if "escalated_cut" in c]
         current, conclusion = settle(problem, vprob, current, params, nfev_base, auto,
-                                     conclusion, _choose_horizon)
+                                     conclusion, _choose_horizon, both=not partly)
         before = current
     prog.close()
     if (before.nmse is not None and problem.segment != chosen
