@@ -62,9 +62,12 @@ def _vector_runner(env: Any, actions: np.ndarray) -> Callable[[], int]:
 
 
 def compare_rates(name: str, ref_name: str, target: float, mine: Callable[[], int],
-                  ref: Callable[[], int], repeats: int = 3) -> dict[str, Any]:
+                  ref: Callable[[], int], repeats: int = 5) -> dict[str, Any]:
     """Best rate of ``mine`` against ``ref`` (each returns the env steps it ran), timed
-    alternately after one warm-up call each; a row of :func:`bench_envs`."""
+    alternately, ``repeats`` rounds, after one warm-up call each; a row of
+    :func:`bench_envs`. Best of five rounds: on a shared 2-core machine one round of
+    either side can lose a third to another process (0.25-0.36 seen for the same code
+    with three rounds)."""
     mine()  # warm-up (compilation, caches)
     ref()
     a, b = [], []
