@@ -90,3 +90,19 @@ def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
         lambda cur: _search(prob, None, cur, given, paths, THRESHOLD, 10, 20, ESCALATED_GAIN))
     assert accepted is not None and accepted[0]["name"] == "nonlinear_stiffness"
     assert prob.compare == "spring" and not stuck
+
+
+def test_report_without_a_floor_does_not_print_none():
+    """An inverse comparison (a closed-loop real record) has no floor: the report's NMSE
+    line leaves the floor out instead of printing "None %"; with a floor it names it."""
+    import json
+    from pathlib import Path
+
+    from hdgym.discrepancy.report import to_markdown
+
+    js = json.loads((Path(__file__).parents[1] / "results/real-data/report.json").read_text())
+    js["floor_nmse"] = None
+    text = to_markdown(js)
+    assert "None" not in text and "made itself" not in text
+    js["floor_nmse"] = 0.0123
+    assert "the final model on a record it made itself: 0.0123 %" in to_markdown(js)

@@ -254,8 +254,10 @@ def to_markdown(js: dict, title: str | None = None, command: str | None = None) 
         "",
         f"NMSE ({js['nmse_on']} record, mean over channels): {js['nmse_before']} % with the base "
         f"model fitted -> {js['nmse_after']} % after (measurement noise alone: "
-        f"{(js.get('noise_nmse') or {}).get('mean')} %; the final model on a record it made "
-        f"itself: {js.get('floor_nmse')} %). {js['conclusion']}.",
+        f"{(js.get('noise_nmse') or {}).get('mean')} %"
+        + ("" if js.get("floor_nmse") is None else  # no floor for an inverse comparison
+           f"; the final model on a record it made itself: {js['floor_nmse']} %")
+        + f"). {js['conclusion']}.",
         "",
     ]
     if js.get("fit_window_s"):
