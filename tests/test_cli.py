@@ -275,7 +275,10 @@ def test_ctrl_c_in_a_real_process(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", driver, "simulate", "--preset",
                              "tuttle-joint1", "--command", "random:1:20", "--duration", "300",
                              "--out", "x.csv"], cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            # a user's shell delivers SIGINT; a test run started in the
+                            # background inherits it ignored, and Python then keeps it so
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout.readline().strip() == "ready"
     time.sleep(1.5)  # into the run (which takes several seconds)
     proc.send_signal(signal.SIGINT)
