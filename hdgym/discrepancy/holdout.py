@@ -238,9 +238,10 @@ class Result:
     ``size``, ``noise``: :func:`effect_size`. ``truth``: the NMSE, percent, of the joint the
     records were made with on the comparison the diagnosis reports before and after on
     (:func:`.truth.truth_nmse`: the floor no model goes below); ``floor``: the workflow's own
-    estimate of it (:func:`.truth.floor_estimate`); ``noise_true`` and ``noise_est``: the
-    validation record's sensor noise per channel and its mean (:func:`.truth.true_noise_nmse`)
-    and what :func:`.noise.noise_nmse` estimates from the record, NMSE percent.
+    estimate of it, the one its outcome was judged by (:attr:`.diagnosis.Diagnosis.floor`);
+    ``noise_true`` and ``noise_est``: the validation record's sensor noise per channel and
+    its mean (:func:`.truth.true_noise_nmse`) and what :func:`.noise.noise_nmse` estimates
+    from the record, NMSE percent.
     """
 
     case: Blind
@@ -314,7 +315,8 @@ def run(case: Blind, quick: bool = False) -> Result:
         case.command, DURATION, seed=2, load_torque=case.load)
     vt = Problem(val, truth, channels=diag.channels)
     return Result(case, diag, seconds, size, noise, truth=T.truth_nmse(diag, truth),
-                  floor=T.floor_estimate(diag), noise_true=T.true_noise_nmse(vt, clean),
+                  floor=math.nan if diag.floor is None else diag.floor,
+                  noise_true=T.true_noise_nmse(vt, clean),
                   noise_est=dict(vt.noise))
 
 

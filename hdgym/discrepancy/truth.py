@@ -8,9 +8,10 @@ what the restarts from the filtered measured state cost. A diagnosis closes at m
 ``before - truth`` of its NMSE (the *closable gap*, :func:`gap_cut`).
 
 Known only for generated cases; the workflow's own outcome estimates that floor without the
-truth (:func:`.floor.floor_nmse`). :func:`true_noise_nmse` measures the record's sensor noise
-alone (the measured channels against the same run's true states), the number
-:func:`.noise.noise_nmse` estimates from the record.
+truth (:func:`.floor.floor_nmse`, kept as :attr:`.diagnosis.Diagnosis.floor`).
+:func:`true_noise_nmse` measures the record's sensor noise alone (the measured channels
+against the same run's true states), the number :func:`.noise.noise_nmse` estimates from
+the record.
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from hdgym.record import Record
 
 from . import residuals as R
 from .diagnosis import Diagnosis
-from .floor import floor_nmse
 from .problem import Problem
 
 
@@ -40,17 +40,6 @@ def truth_nmse(diag: Diagnosis, truth: JointParams) -> float:
     if judged is None:
         return math.nan
     return float(judged.nmse(truth)["mean"])
-
-
-def floor_estimate(diag: Diagnosis) -> float:
-    """Mean over channels of :func:`.floor.floor_nmse` of the diagnosis's final model on its
-    judged comparison, percent (the workflow's own estimate of the truth floor; nan when it
-    cannot be made)."""
-    judged = _judged(diag)
-    if judged is None:
-        return math.nan
-    fl = floor_nmse(judged, diag.after.params)
-    return float(np.mean(list(fl.values()))) if fl else math.nan
 
 
 def gap_cut(before: float, after: float, truth: float) -> float:
