@@ -107,21 +107,32 @@ def ke_at(row: np.ndarray, th: float, on: bool) -> tuple[float, float]:
     return v, d
 
 
+def torsion_and_rate(x: np.ndarray, row: np.ndarray, ke_on: bool,
+                     ratio: float) -> tuple[float, float]:
+    """The torsion (output rad) of sim state ``x`` and its rate (rad/s)."""
+    k0, d0 = ke_at(row, x[L.TH_M], ke_on)
+    return x[L.TH_M] / ratio - x[L.TH_O] - k0, x[L.W_M] * (1 / ratio - d0) - x[L.W_O]
+
+
+def place_motor(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, angle: float,
+                speed: float, tors: float, rate: float) -> None:
+    """Put sim state ``x``'s motor at ``angle`` (rad) and ``speed`` (rad/s), in place; the
+    output follows so that the torsion is ``tors`` and its rate ``rate``."""
+    x[L.TH_M] = angle
+    x[L.W_M] = speed
+    k1, d1 = ke_at(row, angle, ke_on)
+    x[L.TH_O] = angle / ratio - k1 - tors
+    x[L.W_O] = speed * (1 / ratio - d1) - rate
+    x[L.DTH] = tors
+
+
 def shifted(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, d_angle: float,
             d_speed: float) -> np.ndarray:
     """Sim state ``x`` with the motor angle moved by ``d_angle`` (rad) and the motor speed by
     ``d_speed`` (rad/s), the torsion, its rate and the rest kept (the output follows)."""
     x = x.copy()
-    r = ratio
-    k0, d0 = ke_at(row, x[L.TH_M], ke_on)
-    tors = x[L.TH_M] / r - x[L.TH_O] - k0
-    rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
-    x[L.TH_M] += d_angle
-    x[L.W_M] += d_speed
-    k1, d1 = ke_at(row, x[L.TH_M], ke_on)
-    x[L.TH_O] = x[L.TH_M] / r - k1 - tors
-    x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
-    x[L.DTH] = tors
+    tors, rate = torsion_and_rate(x, row, ke_on, ratio)
+    place_motor(x, row, ke_on, ratio, x[L.TH_M] + d_angle, x[L.W_M] + d_speed, tors, rate)
     return x
 
 
@@ -201,24 +212,18 @@ class Restarts:
         r = self.ratio
         row = L.pack(p)
         ke_on = "kinematic_error" in p.effects
-
-        def ke(th: float) -> tuple[float, float]:
-            return ke_at(row, th, ke_on)
-
-        k0, d0 = ke(x[L.TH_M])
-        tors = x[L.TH_M] / r - x[L.TH_O] - k0
-        rate = x[L.W_M] * (1 / r - d0) - x[L.W_O]
+        tors, rate = torsion_and_rate(x, row, ke_on, r)
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[k]
         if self.locked:  # the output stays clamped: the motor angle and speed alone move
             x[L.TH_M] = self.x_rest_angle[k] if at_rest else self.x_th_m[k]
             x[L.W_M] = 0.0 if at_rest else self.x_w_m[k]
-            x[L.DTH] = x[L.TH_M] / r - ke(x[L.TH_M])[0] - x[L.TH_O]
+            x[L.DTH] = x[L.TH_M] / r - ke_at(row, x[L.TH_M], ke_on)[0] - x[L.TH_O]
             return x
         if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
             x[L.TH_M] = self.x_rest_angle[k]
             x[L.W_M] = 0.0
-            k1, d1 = ke(x[L.TH_M])
+            k1, d1 = ke_at(row, x[L.TH_M], ke_on)
             x[L.TH_O] = x[L.TH_M] / r - k1 - tors
             x[L.W_O] = 0.0
             if self.rest_torque is not None:  # and the torque it holds
@@ -229,11 +234,7 @@ class Restarts:
                                  x[L.TH_M], x[L.TH_O])
                 tors = held_torsion(held, x, row, flags)
                 x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+            x[L.DTH] = tors
         else:
-            x[L.TH_M] = self.x_th_m[k]
-            x[L.W_M] = self.x_w_m[k]
-            k1, d1 = ke(x[L.TH_M])
-            x[L.TH_O] = x[L.TH_M] / r - k1 - tors
-            x[L.W_O] = x[L.W_M] * (1 / r - d1) - rate
-        x[L.DTH] = tors
+            place_motor(x, row, ke_on, r, self.x_th_m[k], self.x_w_m[k], tors, rate)
         return x
