@@ -17,6 +17,7 @@ from hdgym.discrepancy import cases, experiments, realdata
 from hdgym.discrepancy.command import diagnose_files
 from hdgym.discrepancy.effect import Scales
 from hdgym.discrepancy.paths import get_value, set_values
+from hdgym.discrepancy.problem import HORIZONS
 from hdgym.discrepancy.registry import REGISTRY, model_params
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
 from hdgym.discrepancy.workflow import diagnose
@@ -315,7 +316,7 @@ def test_nothing_hidden_reports_nothing():
     assert r.found == [], r.diagnosis.conclusion
     assert "nothing" in r.diagnosis.conclusion
     assert r.diagnosis.outcome == "nothing missing"
-    assert r.diagnosis.horizon in (0.5, 0.2, 0.1, 0.05, 0.025)
+    assert r.diagnosis.horizon in HORIZONS
 
 
 def test_effects_say_where_they_can_be_seen():

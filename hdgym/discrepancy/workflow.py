@@ -70,8 +70,9 @@ PARSIMONY = 0.75
 """The simpler effect is preferred if it achieves this share of the winner's improvement (on
 the validation record when there is one, see :func:`_simpler_does_nearly_as_well`)."""
 MAX_STEPS = 4
-FIRST_HORIZON = 0.05
-"""Prediction horizon, s, of the base fit before the record's own is chosen."""
+FIRST_HORIZON = 0.1
+"""Prediction horizon, s, of the base fit before the record's own is chosen (the shortest
+of :data:`.problem.HORIZONS`)."""
 ESCALATE = 2
 """Longer horizons :func:`_escalate` searches when nothing is found at the chosen one."""
 ESCALATED_GAIN = 0.8
