@@ -95,15 +95,18 @@ class Problem(Restarts, InverseComparison, RecordScales):
         channels: compare exactly these channels (a validation record uses
             the training record's), default: what the record supports.
         segment: free-output records are simulated in segments of this many
-            seconds, each restarted from the measured angles, speeds and
-            current (multiple shooting), so a small speed error cannot grow
-            into a position drift that scrambles position-periodic effects
-            (0 or None: one run). Restarts happen only while the measured
+            seconds (multiple shooting); at each segment's end a moving model
+            keeps its own state but its slow drift from the measured motor
+            angle is removed and it takes the measured current
+            (:meth:`.restarts.Restarts._drift_restart`), so a small speed error
+            cannot grow into a position drift that scrambles position-periodic
+            effects (0 or None: one run). Restarts happen only while the measured
             joint moves (faster than 10 % of its typical speed), or early in a
             pause in which the measured joint stands still (no encoder count
             for :data:`.restarts.REST_PAUSE`; restarted at zero speed and, with a torque
-            sensor, at the measured held torque), so sticking and breakaway stay
-            the model's own.
+            sensor, at the measured held torque where the model can hold it), so
+            sticking and breakaway stay the model's own. A locked output restarts
+            on the filtered measured motor angle and speed.
     """
 
     record: Record
@@ -359,10 +362,11 @@ class Problem(Restarts, InverseComparison, RecordScales):
     def choose_horizon(self, p: JointParams, horizons: tuple[float, ...] = HORIZONS) -> float:
         """Set and return the prediction horizon (s) for this record, from the record.
 
-        Multiple shooting restarts the model from the measured state every ``segment``
-        seconds. Too long, and a small speed or phase error of the model ``p`` builds up
-        into a drift no single effect explains (a resonant or stick-slip record); too short,
-        and the restarts' own errors (the measured speed is filtered) dominate. Each of
+        Multiple shooting brings the model back to the record every ``segment`` seconds.
+        Too long, and a small speed or phase error of the model ``p`` builds up within a
+        segment into a drift no single effect explains (a resonant or stick-slip record);
+        too short, and the drift correction absorbs the model's own error (see
+        :data:`HORIZONS`). Each of
         ``horizons`` is tried with ``p``; the longest whose NMSE stays within
         :data:`DRIFT` of the lowest is kept.
         """

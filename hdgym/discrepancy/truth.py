@@ -4,8 +4,9 @@ A hold-out or blind case (:mod:`.holdout`) knows the joint its records were made
 joint, compared with its validation record exactly as the diagnosis compares (the same
 :class:`.problem.Problem`: channels, prediction horizon, restarts, time channels or spring
 curve), shows the *truth floor* (:func:`truth_nmse`): sensor noise, encoder quantization and
-what the restarts from the filtered measured state cost. A diagnosis closes at most
-``before - truth`` of its NMSE (the *closable gap*, :func:`gap_cut`).
+what the restarts cost (a locked output restarts on the filtered measured state; a moving
+joint only has its slow drift removed, which leaves the exact model near the noise). A
+diagnosis closes at most ``before - truth`` of its NMSE (the *closable gap*, :func:`gap_cut`).
 
 Known only for generated cases; the workflow's own outcome estimates that floor without the
 truth (:func:`.floor.floor_nmse`, kept as :attr:`.diagnosis.Diagnosis.floor`).

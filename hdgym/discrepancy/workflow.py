@@ -19,8 +19,10 @@
 NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
 
-The comparison is short-horizon prediction: the model restarts from the measured state every
-horizon, chosen per record with the fitted base model (:meth:`.problem.Problem.choose_horizon`)
+The comparison is short-horizon prediction: the model is brought back to the record every
+horizon (its slow drift from the measured motor angle removed while the joint moves,
+the measured rest state in pauses; :mod:`.restarts`), chosen per record with the fitted
+base model (:meth:`.problem.Problem.choose_horizon`)
 and again (never longer) after each effect added; when the base model shows nothing, the
 longer horizons on which it drifts and the shortest one are searched too (:func:`_escalate`).
 Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
