@@ -86,3 +86,43 @@ def test_gap_cut():
     assert T.gap_cut(10.0, 4.0, 5.0) > 1.0  # below the truth: more than the gap
     assert math.isnan(T.gap_cut(1.0, 0.5, 2.0))  # the truth above before: no gap
     assert math.isnan(T.gap_cut(1.0, 0.5, math.nan))
+
+
+def test_channel_selection_reads_the_sensor_noise_not_fast_content():
+    """A current or torque channel is compared when its filtered signal stands SNR x (RMS)
+    above its filtered sensor noise. Fast content the channel filter removes (a 100 Hz line)
+    is no sensor noise: the old first-difference estimate read it as such and dropped
+    channels 6-60 x above their noise; the third-difference estimate keeps them, and still
+    drops a channel that is truly below the ratio."""
+    t = np.arange(6000) * DT
+    rng = np.random.default_rng(5)
+    gain = N.white_gain(DT, CUTOFF)
+    for slow, line, sigma, keep in ((0.05, 0.1, 0.002, True), (0.05, 0.1, 0.02, True),
+                                    (0.002, 0.0, 0.002, False)):
+        x = (slow * np.sin(2 * math.pi * t) + line * np.sin(2 * math.pi * 100.0 * t + 0.3)
+             + rng.normal(0.0, sigma, t.size))
+        signal = float(np.var(R.lowpass(x, DT, CUTOFF)))
+        true_snr = math.sqrt(signal / (sigma**2 * gain))
+        assert (true_snr > N.SNR) == keep, true_snr  # the case is what it claims to be
+        assert N.snr_ok(x, DT, CUTOFF) == keep, (slow, line, sigma)
+        old = float(np.var(np.diff(x))) / 2.0 * 2.0 * CUTOFF * DT
+        if line:  # the old estimate dropped it
+            assert signal < N.SNR**2 * old
+        raw = R.Raw(np.zeros(t.size), output_torque=x, motor_current=x)
+        names = N.pick_channels(raw, True, 100.0, DT, CUTOFF, 4000.0, None)
+        assert ("output_torque" in names) == keep and ("motor_current" in names) == keep
+
+
+def test_channel_selection_on_a_record_of_known_noise():
+    """tuttle-joint3 turning at constant current: the torque stands ~240 x above its sensor
+    noise (kept), the current ~2 x (dropped; both measured against the true noise)."""
+    from hdgym.params import preset
+    from hdgym.sim import Simulator
+
+    p = preset("tuttle-joint3")
+    rec = Simulator(p).run("step:0.30", 3.0, seed=1)
+    raw = R.Raw(np.asarray(rec.motor_angle), np.asarray(rec.output_angle),
+                np.asarray(rec.output_torque), np.asarray(rec.motor_current))
+    names = N.pick_channels(raw, False, p.ratio, DT, CUTOFF, p.sensors.motor_counts,
+                            p.sensors.output_counts)
+    assert "output_torque" in names and "motor_current" not in names

@@ -106,3 +106,26 @@ def test_settle_leaves_the_validation_record_alone_when_a_candidate_explained_pa
     out, why = S.settle(train, val, cur, truth, 20, False, "", both=False)
     assert val.nmse(out.params)["mean"] == pytest.approx(val.nmse(p0)["mean"], rel=0.05)
     assert "together" not in why
+
+
+def test_converge_named_refits_a_model_whose_polish_stopped_short(monkeypatch):
+    """A final model with effects named, polished with one short fit, is refitted until it
+    converges; kept only when the validation record does not get worse."""
+    truth = preset("tuttle-joint3")
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    t = np.linspace(0.0, 1.0, 60)
+    train = _Record(truth, np.column_stack([np.sin(5 * t), np.sin(5 * t) + 0.02 * t]))
+    p0 = _start(truth, 1.3, 0.75)
+    short = fit(train, p0, _fps(truth), max_nfev=3)
+    out = S.converge_named(train, None, short, truth, 3)
+    assert out is not None and out.cost < 0.1 * short.cost
+    assert train.nmse(out.params)["mean"] == pytest.approx(100 * out.cost)
+    # the same refit is refused when it raises the validation record's NMSE (its optimum
+    # lies elsewhere)
+    other = _start(truth, 1.3, 0.75)
+    val = _Record(other, np.eye(2))
+    assert val.nmse(out.params)["mean"] > val.nmse(short.params)["mean"]
+    assert S.converge_named(train, val, short, truth, 3) is None
+    # a model already at its optimum is left alone
+    at = FitResult(truth, {}, train.nmse(truth), 0, 0.0)
+    assert S.converge_named(train, None, at, truth, 3) is None

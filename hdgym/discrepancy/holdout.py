@@ -4,11 +4,12 @@ The tuned cases (:mod:`.cases`) are what the workflow's thresholds were set on. 
 here are only ever evaluated:
 
 * :data:`BLIND` -- the nine records of issue 14 (``hdgym simulate`` on a preset with every
-  effect on, diagnosed against the preset with one effect switched off; 6 s, two seeds);
+  effect on, diagnosed against the preset with one effect switched off; 6 s, two seeds of
+  one command: a ``step`` or ``sine`` validation replays the training run's angles);
 * :func:`holdout_cases` -- generated from a fixed seed: every effect on two presets drawn at
   random among those whose parameters give it a size, each with an excitation drawn from the
-  ones that can show it, and the base model's fitted parameters off nominal by 2-5 %, as a
-  real drive would be.
+  ones that can show it (validated on the same kind drawn again), and the base model's
+  fitted parameters off nominal by 2-5 %, as a real drive would be.
 
 Each case also measures how much the hidden effect changes its record (:func:`effect_size`);
 an effect that changes it by less than :data:`PRESENT` x the measurement noise is not
@@ -24,8 +25,8 @@ would give stay beside it in the tables. A miss is *honest* when the outcome say
 noise level) or lists the hidden effect as untestable rather than "nothing missing".
 
 ``python -m hdgym.discrepancy.holdout [--quick] [--set blind|holdout|both] [--seed N]
-[--only NAME ...] [--out FILE.md]`` (``--seed`` other than 14 draws a development set).
-(nothing is written without ``--out``).
+[--only NAME ...] [--out FILE.md]`` (``--seed`` other than 14 draws a development set;
+nothing is written without ``--out``).
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ class Blind:
     ``off``: the base model's fitted parameters are off nominal by up to this share (0: the
     preset's values, as ``hdgym diagnose --preset P --without E``).
     ``load``: constant external load torque, N m.
+    ``validation``: the validation record's command (None: ``command`` again, as issue 14
+    defines the blind records; see :func:`records`).
     """
 
     preset: str
@@ -71,6 +74,7 @@ class Blind:
     off: float = 0.0
     load: float | None = None
     seed: int = 0
+    validation: str | None = None
 
     @property
     def name(self) -> str:
@@ -112,23 +116,16 @@ def _command(kind: str, imax: float, rng: np.random.Generator) -> tuple[str, boo
     """``(command, locked, load fraction)`` of one excitation kind, sized to the current limit."""
     f = float(rng.uniform(0.25, 0.5))
     hz = float(rng.choice([0.5, 1.0, 2.0]))
-    if kind == "step":
-        return f"step:{f * imax:.3g}", False, 0.0
-    if kind == "sine":
-        return f"sine:{f * imax:.3g}:{hz:g}", False, 0.0
-    if kind == "random":
-        return f"random:{0.6 * f * imax:.3g}:{2 * hz:g}", False, 0.0
-    if kind == "locked-random":
-        return f"random:{0.6 * f * imax:.3g}:{2 * hz:g}", True, 0.0
-    if kind == "locked-sine":
-        return f"sine:{f * imax:.3g}:{hz:g}", True, 0.0
-    if kind == "loaded-sine":
-        return f"sine:{f * imax:.3g}:{hz:g}", False, 0.3
-    if kind == "big-step":
-        return f"step:{1.3 * imax:.3g}", False, 0.0
-    if kind == "big-sine":
-        return f"sine:{1.3 * imax:.3g}:{hz:g}", False, 0.0
-    raise ValueError(f"unknown excitation {kind!r}")
+    # big-step: 1.3-1.55 x the current limit (drawn, so a validation draw differs; saturated)
+    spec = {"step": f"step:{f * imax:.3g}", "sine": f"sine:{f * imax:.3g}:{hz:g}",
+            "random": f"random:{0.6 * f * imax:.3g}:{2 * hz:g}",
+            "big-step": f"step:{(1.05 + f) * imax:.3g}",
+            "big-sine": f"sine:{1.3 * imax:.3g}:{hz:g}"}
+    spec |= {"locked-random": spec["random"], "locked-sine": spec["sine"],
+             "loaded-sine": spec["sine"]}
+    if kind not in spec:
+        raise ValueError(f"unknown excitation {kind!r}")
+    return spec[kind], kind.startswith("locked-"), 0.3 if kind.startswith("loaded-") else 0.0
 
 
 HOLDOUT_SEED = 14
@@ -143,8 +140,26 @@ made on the sets of :data:`DEVELOPMENT_SEEDS`; nothing was looked at or changed 
 before its first page."""
 
 
+def validation_command(kind: str, imax: float, seed: int, training: str) -> str:
+    """A hold-out case's validation excitation: ``kind`` drawn again by :func:`_command`'s
+    rules (another amplitude, frequency or cutoff) from ``default_rng([seed, 2])``, ``seed``
+    the case's; a draw equal to ``training`` is drawn again (up to 20 times). The simulator
+    is open-loop and deterministic and a record's seed changes only the sensor noise and a
+    ``random`` command's realization, so the training command again would replay the
+    training run on the angle channels (an overfit model unseen there).
+    """
+    rng = np.random.default_rng([seed, 2])
+    cmd = training
+    for _ in range(20):
+        cmd = _command(kind, imax, rng)[0]
+        if cmd != training:
+            break
+    return cmd
+
+
 def holdout_cases(seed: int = HOLDOUT_SEED) -> list[Blind]:
-    """Every effect on two presets drawn at random, excitations drawn, base 2-5 % off."""
+    """Every effect on two presets drawn at random, excitations drawn, base 2-5 % off; the
+    validation excitation is the same kind drawn again (:func:`validation_command`)."""
     rng = np.random.default_rng(seed)
     names = [n for n in preset_names()]
     out = []
@@ -157,13 +172,18 @@ def holdout_cases(seed: int = HOLDOUT_SEED) -> list[Blind]:
             kind = kinds[k % len(kinds)]
             cmd, locked, load = _command(kind, p.amplifier.current_limit, rng)
             t_load = load * p.motor.torque_constant * p.ratio * p.amplifier.current_limit
+            s = int(rng.integers(1 << 16))
             out.append(Blind(str(name), effect, cmd, locked, off=0.05,
-                             load=t_load if load else None, seed=int(rng.integers(1 << 16))))
+                             load=t_load if load else None, seed=s,
+                             validation=validation_command(kind, p.amplifier.current_limit, s,
+                                                           cmd)))
     for k, name in enumerate(rng.choice(names, size=2, replace=False)):
         p = preset(str(name))
-        cmd, locked, _ = _command(("sine", "locked-random")[k], p.amplifier.current_limit, rng)
-        out.append(Blind(str(name), None, cmd, locked, off=0.05,
-                         seed=int(rng.integers(1 << 16))))
+        kind = ("sine", "locked-random")[k]
+        cmd, locked, _ = _command(kind, p.amplifier.current_limit, rng)
+        s = int(rng.integers(1 << 16))
+        out.append(Blind(str(name), None, cmd, locked, off=0.05, seed=s,
+                         validation=validation_command(kind, p.amplifier.current_limit, s, cmd)))
     return out
 
 
@@ -191,11 +211,20 @@ def base_model(case: Blind, truth: JointParams) -> JointParams:
 
 
 def records(case: Blind, truth: JointParams) -> tuple[Record, Record]:
-    """Training (seed 1) and validation (seed 2) records, as ``hdgym simulate`` makes them."""
+    """Training (seed 1) and validation (seed 2) records, as ``hdgym simulate`` makes them.
+
+    The validation record runs :attr:`Blind.validation` (a hold-out case's excitation drawn
+    again) with its own seed: sensor noise and a ``random`` command's realization
+    (:meth:`hdgym.sim.Simulator.run` seeds both). A blind case keeps issue 14's one command
+    for both records; its validation is then as independent as that command allows: a
+    ``random`` command is a different realization, while a ``step`` or ``sine`` fixes the
+    noise-free run: its validation differs from training only in the current and torque
+    noise (the encoder angles are the training run's again).
+    """
     out = []
-    for seed in (1, 2):
+    for seed, cmd in ((1, case.command), (2, case.validation or case.command)):
         sim = Simulator(truth, locked_output=case.locked)
-        rec = sim.run(case.command, DURATION, seed=seed, load_torque=case.load)
+        rec = sim.run(cmd, DURATION, seed=seed, load_torque=case.load)
         out.append(Record(dict(rec.columns), dict(rec.meta), f"{case.name} seed {seed}"))
     return out[0], out[1]
 
@@ -312,7 +341,7 @@ def run(case: Blind, quick: bool = False) -> Result:
     seconds = time.perf_counter() - t0
     size, noise = effect_size(case, truth, train)
     clean = Simulator(truth, locked_output=case.locked, sensors=False).run(
-        case.command, DURATION, seed=2, load_torque=case.load)
+        case.validation or case.command, DURATION, seed=2, load_torque=case.load)
     vt = Problem(val, truth, channels=diag.channels)
     return Result(case, diag, seconds, size, noise, truth=T.truth_nmse(diag, truth),
                   floor=math.nan if diag.floor is None else diag.floor,
@@ -363,50 +392,52 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
 
     parts = ["", "## Blind and hold-out cases (never used for tuning)", "",
              "Made by `hdgym.discrepancy.holdout` (run here by the same command): full presets "
-             "with every effect on; the base model is the preset with one effect switched off "
-             "(its parameters neutral). *Blind*: the nine records of issue 14 (6 s, "
-             "`hdgym simulate`, seeds 1 and 2), the base at the preset's values. *Hold-out*: "
+             "with every effect on; the base model is the preset with one effect switched off (its"
+             " parameters neutral). *Blind*: the nine records of issue 14 (6 s, `hdgym simulate`, "
+             "seeds 1 and 2 of one command), the base at the preset's values; the simulator is "
+             "deterministic and the seed changes only the current and torque noise and a random "
+             "command's realization, so a blind step or sine validation record has the training "
+             "record's angles (the command, as the issue defines it, allows no more). *Hold-out*: "
              "every effect on two presets drawn with a fixed seed among those whose parameters "
-             "give it a size, an excitation drawn from those that can show it, and every "
-             "fitted base parameter off nominal by 2-5 %. *Effect NMSE*: how much the hidden "
-             "effect changes the record (noise-free runs with and without it), beside the "
-             "record's measurement-noise NMSE; below 3 x the noise it is *not present*. "
-             "*Truth*: the NMSE of the joint the records were made with (its true parameters, "
-             "every effect on) on the comparison before and after are reported on (same "
-             "horizon, channels, time or spring curve; `hdgym.discrepancy.truth`): the floor "
-             "no model goes below, unless the comparison itself (restarts every horizon) "
-             "favours a fitted model. *Gap cut*: the share of the closable gap, (before - "
-             "after) / (before - truth), closed (\"-\" when the truth is not below before). "
-             "A case *hits* when the hidden effect is named first and the gap cut (the raw cut "
-             "where there is none) is >= 80 % (nothing present hidden: nothing named and not "
-             "\"unexplained\"); the summary also counts the hits by the raw cut. A "
-             "miss is "
-             "*honest* when the outcome says \"unexplained\" or the hidden effect is listed "
-             "as untestable on the record. Outcomes: *named* when the final NMSE is within "
-             f"{FLOOR_FACTOR:g} x what the final model shows on a record it made itself (its "
-             "own floor, `hdgym.discrepancy.floor.floor_nmse`, mean over channels; "
+             "give it a size, an excitation drawn from those that can show it, and every fitted "
+             "base parameter off nominal by 2-5 %; the validation record (seed 2) runs the same "
+             "kind of excitation drawn again, seeded by the case (another amplitude, frequency or "
+             "cutoff; `holdout.validation_command`). *Effect NMSE*: how much the hidden effect "
+             "changes the record (noise-free runs with and without it), beside the record's "
+             "measurement-noise NMSE; below 3 x the noise it is *not present*. *Truth*: the NMSE "
+             "of the joint the records were made with (its true parameters, every effect on) on "
+             "the comparison before and after are reported on (same horizon, channels, time or "
+             "spring curve; `hdgym.discrepancy.truth`): the floor no model goes below, unless the "
+             "comparison itself (restarts every horizon) favours a fitted model. *Gap cut*: the "
+             "share of the closable gap, (before - after) / (before - truth), closed (\"-\" when "
+             "the truth is not below before). A case *hits* when the hidden effect is named first "
+             "and the gap cut (the raw cut where there is none) is >= 80 % (nothing present "
+             "hidden: nothing named and not \"unexplained\"); the summary also counts the hits by "
+             "the raw cut. A miss is *honest* when the outcome says \"unexplained\" or the hidden "
+             "effect is listed as untestable on the record. Outcomes: *named* when the final NMSE "
+             f"is within {FLOOR_FACTOR:g} x what the final model shows on a record it made "
+             "itself (its own floor, `hdgym.discrepancy.floor.floor_nmse`, mean over channels; "
              "`hdgym.discrepancy.outcome.FLOOR_FACTOR`), else *named; rest unexplained*; with "
              "nothing named, *nothing missing* when the final NMSE is within "
-             f"{NOISE_FACTOR:g} x the measurement-noise NMSE (`hdgym.discrepancy.noise`), or "
-             f"at most {RESOLVED:g} % (`NOISE_FACTOR`, `RESOLVED`, set on the tuned cases), "
-             "else *unexplained*; either is *unexplained* also when one channel alone is above "
-             "3 x its floor and beyond what the fitted parameters can change it "
-             "(`hdgym.discrepancy.floor`). On a locked output "
-             "whose time channels show nothing, the spring curve (motor angle over bins of "
-             "the measured torque and its direction, one run; `hdgym.discrepancy.spring`) is "
-             "searched for the spring's effects; a case found there reports before and after "
-             "on the curve (*found* says \"(spring curve)\"). The prediction horizon is "
-             "chosen per record and again after each effect added, and other horizons "
-             "(longer ones on which the model drifts, the shortest) are searched when "
-             "nothing is found at it "
+             f"{NOISE_FACTOR:g} x the measurement-noise NMSE (`hdgym.discrepancy.noise`), or at "
+             f"most {RESOLVED:g} % (`NOISE_FACTOR`, `RESOLVED`, set on the tuned cases), else "
+             "*unexplained*; either is "
+             "*unexplained* also when one channel alone is above 3 x its floor and beyond what the"
+             " fitted parameters can change it (`hdgym.discrepancy.floor`). On a locked output "
+             "whose time channels show nothing, the spring curve (motor angle over bins of the "
+             "measured torque and its direction, one run; `hdgym.discrepancy.spring`) is searched "
+             "for the spring's effects; a case found there reports before and after on the curve "
+             "(*found* says \"(spring curve)\"). The prediction horizon is chosen per record and "
+             "again after each effect added, and other horizons (longer ones on which the model "
+             "drifts, the shortest) are searched when nothing is found at it "
              "(`hdgym.discrepancy.problem.Problem.choose_horizon`, "
-             "`hdgym.discrepancy.workflow._escalate`). These cases run the "
-             "workflow's quick fit settings (fewer least-squares iterations), so the "
-             "full-preset diagnoses fit in one run of the page's command. Hold-out sets: "
-             f"seeds {', '.join(map(str, DEVELOPMENT_SEEDS))}, whose failing cases were run "
-             "one by one to find their causes while the workflow was changed (so they are no "
-             f"longer untouched: development sets), and seed {FRESH_SEED}, drawn the same way "
-             "after those changes and never run before this page: the set to judge by.", ""]
+             "`hdgym.discrepancy.workflow._escalate`). These cases run the workflow's quick fit "
+             "settings (fewer least-squares iterations), so the full-preset diagnoses fit in one "
+             "run of the page's command. Hold-out sets: seeds "
+             f"{', '.join(map(str, DEVELOPMENT_SEEDS))}, whose failing cases were run one by "
+             "one to find their causes while the workflow was changed (so they are no longer "
+             f"untouched: development sets), and seed {FRESH_SEED}, drawn the same way after "
+             "those changes and never run before this page: the set to judge by.", ""]
     sets = [("Blind (issue 14)", list(BLIND))]
     if quick:
         parts += ["(A --quick run: the hold-out cases are skipped.)", ""]

@@ -19,7 +19,8 @@ Two kinds of noise reach the filtered channels (:func:`.residuals.channels`):
 The first-difference estimate this replaces (``var(diff)/2`` of the raw channel, times the
 kept share of the band) read the signal's own steps and slopes as noise and treated the
 gradient of a quantized angle as white: 10-1000 x the sensor noise on speed, current and
-torque.
+torque. The same estimate picks which current and torque channels a record is compared on
+(:func:`pick_channels`, :func:`snr_ok`).
 """
 
 from __future__ import annotations
@@ -168,3 +169,37 @@ def noise_nmse(raw: R.Raw, names: tuple[str, ...], ratio: float, dt: float, cuto
            / max(float(np.var(measured[name])), 1e-300) for name in names}
     out["mean"] = float(np.mean([out[k] for k in names])) if names else 0.0
     return out
+
+
+SNR = 5.0
+"""A current or torque channel is compared when its filtered signal's RMS stands this many
+times above its filtered white noise's (:func:`snr_ok`)."""
+
+
+def snr_ok(x: np.ndarray, dt: float, cutoff: float, ratio: float = SNR) -> bool:
+    """Whether the filtered signal ``x`` stands ``ratio`` times (RMS) above its filtered white
+    noise: the noise's standard deviation read from third differences (:func:`white_sigma`),
+    its filtered share by the channel filter's own gain (:func:`white_gain`)."""
+    noise = white_sigma(x) ** 2 * white_gain(dt, cutoff)
+    return float(np.var(R.lowpass(np.asarray(x, dtype=float), dt, cutoff))) > ratio**2 * noise
+
+
+def pick_channels(raw: R.Raw, locked: bool, ratio: float, dt: float, cutoff: float,
+                  motor_counts: float | None, output_counts: float | None,
+                  inverse: bool = False) -> tuple[str, ...]:
+    """Which channels a record supports and shows above its noise: the motor angle (locked
+    output) or speed, the transmission error when it spans more than 3 output encoder
+    counts (standard deviation), the torque and current when they pass :func:`snr_ok`; an
+    inverse comparison: the current alone."""
+    if inverse:
+        return ("motor_current",)
+    names = ["motor_angle" if locked else "motor_speed"]
+    if not locked and raw.output_angle is not None:
+        te = R.lowpass(raw.output_angle - raw.motor_angle / ratio, dt, cutoff)
+        q = 2 * math.pi / output_counts if output_counts else 0.0
+        if np.std(te) > 3.0 * q:
+            names.append("transmission_error")
+    for name, x in (("output_torque", raw.output_torque), ("motor_current", raw.motor_current)):
+        if x is not None and snr_ok(x, dt, cutoff):
+            names.append(name)
+    return tuple(names)

@@ -36,7 +36,7 @@ from . import residuals as R
 from . import spring as S
 from .effect import Scales
 from .inverse import InverseComparison
-from .noise import noise_nmse
+from .noise import noise_nmse, pick_channels
 from .record_scales import RecordScales
 from .restarts import Restarts, shifted
 
@@ -149,8 +149,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
                     output_angle=None if self.locked else rec.output_angle,
                     output_torque=rec.output_torque, motor_current=rec.motor_current)
         self.raw = raw
-        self.names = R.pick_channels(raw, self.locked, self.ratio, self.dt, self.cutoff,
-                                     *self.counts, inverse=self.inverse)
+        self.names = pick_channels(raw, self.locked, self.ratio, self.dt, self.cutoff,
+                                   *self.counts, inverse=self.inverse)
         if self.channels is not None:
             missing = [c for c in self.channels if c not in R.CHANNEL_UNITS]
             if missing:

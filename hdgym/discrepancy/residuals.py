@@ -105,34 +105,6 @@ def channels(raw: Raw, names: tuple[str, ...], ratio: float, dt: float,
     return {name: np.ascontiguousarray(filt[:, k]) for k, name in enumerate(names)}
 
 
-def pick_channels(raw: Raw, locked: bool, ratio: float, dt: float, cutoff: float,
-                  motor_counts: float | None, output_counts: float | None,
-                  inverse: bool = False) -> tuple[str, ...]:
-    """Which channels a record supports and shows above its encoder resolution."""
-    if inverse:
-        return ("motor_current",)
-    names = ["motor_angle" if locked else "motor_speed"]
-    if not locked and raw.output_angle is not None:
-        te = lowpass(raw.output_angle - raw.motor_angle / ratio, dt, cutoff)
-        q = 2 * math.pi / output_counts if output_counts else 0.0
-        if np.std(te) > 3.0 * q:
-            names.append("transmission_error")
-    for name, x in (("output_torque", raw.output_torque), ("motor_current", raw.motor_current)):
-        if x is not None and _snr_ok(x, dt, cutoff):
-            names.append(name)
-    return tuple(names)
-
-
-def _snr_ok(x: np.ndarray, dt: float, cutoff: float, ratio: float = 5.0) -> bool:
-    """Whether the filtered signal stands ``ratio`` times above its filtered white noise.
-
-    The noise variance is estimated from first differences (``var(diff)/2``
-    for white noise) and scaled by the fraction of the band the filter keeps.
-    """
-    noise = float(np.var(np.diff(x))) / 2.0 * min(1.0, 2.0 * cutoff * dt)
-    return float(np.var(lowpass(x, dt, cutoff))) > ratio**2 * noise
-
-
 # ------------------------------------------------------------------ context
 
 

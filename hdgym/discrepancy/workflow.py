@@ -53,7 +53,7 @@ from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
-from .settle import settle
+from .settle import converge_named, settle
 from .spring_search import search_view, views
 
 THRESHOLD = 0.4
@@ -438,9 +438,18 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
-    outcome, nexts, stuck, floor = judge(
-        judged, current.params, model_params(current.params, judged.scales, params), steps,
-        candidates, untestable_why, params, spring_stuck)
+    def judged_as(p: JointParams) -> tuple:
+        return judge(judged, p, model_params(p, judged.scales, params), steps, candidates,
+                     untestable_why, params, spring_stuck)
+
+    outcome, nexts, stuck, floor = judged_as(current.params)
+    refit = (converge_named(problem, vprob, current, params, nfev_base)
+             if steps and outcome != "named" else None)  # the polish stopped short?
+    if refit is not None:
+        conclusion += (f"; the final model refitted until it converged: NMSE "
+                       f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
+        current = refit
+        outcome, nexts, stuck, floor = judged_as(current.params)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
