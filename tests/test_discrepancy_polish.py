@@ -26,7 +26,7 @@ def test_spring_curve_polish_uses_the_coarse_step(monkeypatch, compare):
     better)."""
     p = preset("tuttle-joint3")
     current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
-    trial = FitResult(p, {}, {"mean": 0.1}, 0, 0.1)
+    trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.1}, 0, 0.1)
     cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.9}
     calls = []
     monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
@@ -35,7 +35,7 @@ def test_spring_curve_polish_uses_the_coarse_step(monkeypatch, compare):
 
     def fit(problem, q, fps, **kw):
         calls.append(kw)
-        return trial
+        return current if q is current.params else trial  # (the control polish gains nothing)
 
     monkeypatch.setattr(W, "fit", fit)
     accepted, _, _ = W._search(_Problem(compare), None, current, p, [], 0.4, 10, 20)
@@ -50,12 +50,12 @@ def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
     (:func:`hdgym.discrepancy.settle.settle`, ``both``)."""
     p = preset("tuttle-joint3")
     current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
-    trial = FitResult(p, {}, {"mean": 0.4}, 0, 0.4)
+    trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.4}, 0, 0.4)
     cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.6}
     monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
     monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
     monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
-    monkeypatch.setattr(W, "fit", lambda *a, **k: trial)
+    monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: current if q is p else trial)
 
     vals = iter([{"x": 1.0, "mean": 1.0}, {"x": 0.45, "mean": 0.45}])
 
@@ -69,3 +69,25 @@ def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
                                  mean_gain=0.8)
     assert accepted is None and "needs 80 %" in why
     assert cand["escalated_cut"] == pytest.approx(0.55)
+
+
+def test_a_candidate_is_judged_against_the_base_model_polished_alike(monkeypatch):
+    """The polish gives an accepted candidate more iterations than its trial; a base fit
+    short of its optimum gains from them too, and a candidate that cuts the cost by the
+    threshold only against the unpolished base is taking up the fit's slack (the tuned case
+    none (current steps) in --quick: Stribeck friction cut 27 % against the base polished
+    alike). The same candidate against a base the polish cannot improve is accepted."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+    trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.5}, 0, 0.5)
+    cand = {"name": "stribeck_friction", "score": 0.5, "relative_improvement": 0.5}
+    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
+    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
+    slack = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.6}, 0, 0.6)
+    monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: slack if q is p else trial)
+    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is None and "polished alike" in why and "16.7 %" in why
+    monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: current if q is p else trial)
+    accepted, _, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is not None and accepted[0]["name"] == "stribeck_friction"

@@ -13,8 +13,8 @@ that neither a missing effect nor the record's noise made:
   :data:`SETTLE_TOL` of the cost;
 * the same holds of a model with effects named: the polish after each effect
   (:func:`.workflow._search`) has one fit's budget, and its residual is judged against the
-  model's own floor. Before that residual is called unexplained, :func:`converge_named`
-  refits the final model (base and named effects) until it converges;
+  model's own floor and reported. Before that, :func:`converge_named` refits the final
+  model (base and named effects) until it converges;
 * the training record does not pin the parameters the validation record shows: a record
   whose joint mostly sticks (a random command below the breakaway) leaves a valley of
   settings of inertia, spring and friction that fit it equally well, and the validation
@@ -133,8 +133,10 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     Each effect's polish has one fit's budget; a model some per cent off nominal with a
     new effect switched on may need more to reach its optimum (the hold-out case hdf40 /
     coulomb_friction / sine:5.85:2, seed 26, stopped at 0.179 % on the training record;
-    converged, 0.096 %). Every parameter of the model (:func:`.registry.model_params`) is
-    refitted on the training record by :func:`converge` (``nfev`` evaluations a round).
+    converged, 0.096 %; its validation NMSE 0.174 -> 0.112 %, though 0.174 % was already
+    within the 2 x floor that reads *named*). Every parameter of the model
+    (:func:`.registry.model_params`) is refitted on the training record by :func:`converge`
+    (``nfev`` evaluations a round).
     Returns the refit when it lowers the training cost and, with a validation record, does
     not raise its mean NMSE; else None.
     """

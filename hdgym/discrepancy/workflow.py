@@ -11,8 +11,9 @@
 3. Trial-refit the :data:`TOP_K` best, keep the one that lowers the cost
    most, and add it if the relative improvement is at least
    :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
-   percentage points), and, when a validation record is given, if it also
-   lowers the validation NMSE by :data:`VALIDATION_GAIN`. Repeat until no
+   percentage points; polished, also against the base model polished alike), and,
+   when a validation record is given, if it also lowers the validation NMSE by
+   :data:`VALIDATION_GAIN`. Repeat until no
    candidate passes; then say that nothing (more) is missing rather than
    invent an effect.
 
@@ -177,7 +178,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
         k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
         if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
             trials.insert(0, trials.pop(k))
-    accepted = None
+    accepted = ctrl = None
     reasons = []
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
@@ -197,6 +198,17 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                        search=True, coarse=problem.compare == "spring")
         if polished.cost > res.cost:
             polished = res
+        # the control polish: the same fit without the effect, so the polish's extra
+        # iterations are not credited to it (a base fit short of its optimum lets any extra
+        # parameter take up the slack)
+        ctrl = ctrl or fit(problem, current.params, model_params(current.params, problem.scales,
+                                                                 params), max_nfev=nfev_polish,
+                           search=True, coarse=problem.compare == "spring")
+        rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
+        if ctrl.cost < current.cost and rel_ctrl < threshold:
+            reasons.append(f"{best['name']} cuts the cost by {100 * rel_ctrl:.1f} % against "
+                           f"the base model polished alike (threshold {100 * threshold:.0f} %)")
+            continue
         if vprob is not None:
             # hold-out check: an effect that fits the training record better but does not
             # carry over to the validation record fits noise or the fit's slack; per
@@ -443,8 +455,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                      untestable_why, params, spring_stuck)
 
     outcome, nexts, stuck, floor = judged_as(current.params)
-    refit = (converge_named(problem, vprob, current, params, nfev_base)
-             if steps and outcome != "named" else None)  # the polish stopped short?
+    # the polish after each effect had one fit's budget: the named model, converged
+    refit = converge_named(problem, vprob, current, params, nfev_base) if steps else None
     if refit is not None:
         conclusion += (f"; the final model refitted until it converged: NMSE "
                        f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
