@@ -131,16 +131,13 @@ def _command(kind: str, imax: float, rng: np.random.Generator) -> tuple[str, boo
 HOLDOUT_SEED = 14
 """Seed of the first reported hold-out set (other seeds draw development sets)."""
 DEVELOPMENT_SEEDS = (14, 26, 38)
-"""Hold-out sets whose failing cases were run one by one to find why they failed while the
-workflow was changed (seeds 14 and 26 on 2026-11-26, seed 38 on 2026-11-27, each after its
-first page as the fresh set): no longer untouched by development."""
+"""Hold-out sets whose failing cases were run one by one while the workflow was changed
+(14, 26 and 38, each after its first page, all on 2026-11-26): no longer untouched."""
 PAGE_DEVELOPMENT_SEEDS = (38,)
-"""The development sets the page reports beside the fresh one (the latest; the others run
-with ``--seed``: each set costs the page about ten minutes)."""
+"""Development sets the page reports (the latest; the others: ``--seed``)."""
 FRESH_SEED = 50
-"""Seed of the hold-out set that judges the workflow: drawn on 2026-11-27 after the changes
-made on the sets of :data:`DEVELOPMENT_SEEDS`; nothing was looked at or changed on it
-before its first page."""
+"""Seed of the hold-out set that judges the workflow: drawn on 2026-11-26 after the changes
+made on the sets of :data:`DEVELOPMENT_SEEDS`, never run before its first page."""
 
 
 def validation_command(kind: str, imax: float, seed: int, training: str) -> str:
