@@ -342,7 +342,7 @@ def run(case: Blind, quick: bool = False) -> Result:
     size, noise = effect_size(case, truth, train)
     clean = Simulator(truth, locked_output=case.locked, sensors=False).run(
         case.validation or case.command, DURATION, seed=2, load_torque=case.load)
-    vt = Problem(val, truth, channels=diag.channels)
+    vt = Problem(val, truth, channels=diag.problem.time_names if diag.problem else diag.channels)
     return Result(case, diag, seconds, size, noise, truth=T.truth_nmse(diag, truth),
                   floor=math.nan if diag.floor is None else diag.floor,
                   noise_true=T.true_noise_nmse(vt, clean),
