@@ -44,6 +44,14 @@ def test_spring_curve_polish_uses_the_coarse_step(monkeypatch, compare):
     assert calls[-1]["coarse"] is (compare == "spring")
 
 
+def _one_candidate(monkeypatch, cand: dict, trial: FitResult, fit) -> None:
+    """The search sees ``cand`` alone, its trial refit gives ``trial`` and fits go to
+    ``fit`` (no model parameters)."""
+    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
+    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
+    monkeypatch.setattr(W, "fit", fit)
+
 def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
     """A candidate that passes every check but the cut asked at an escalated horizon keeps
     that cut (``escalated_cut``): the diagnosis then does not call the residual slack
@@ -52,10 +60,8 @@ def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
     current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
     trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.4}, 0, 0.4)
     cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.6}
-    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
-    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
-    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
-    monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: current if q is p else trial)
+    _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
+        current if q is p else trial))
 
     vals = iter([{"x": 1.0, "mean": 1.0}, {"x": 0.45, "mean": 0.45}])
 
@@ -81,11 +87,9 @@ def test_a_candidate_is_judged_against_the_base_model_polished_alike(monkeypatch
     current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
     trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.5}, 0, 0.5)
     cand = {"name": "stribeck_friction", "score": 0.5, "relative_improvement": 0.5}
-    monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
-    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
-    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
     slack = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.6}, 0, 0.6)
-    monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: slack if q is p else trial)
+    _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
+        slack if q is p else trial))
     accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is None and "polished alike" in why and "16.7 %" in why
     monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: current if q is p else trial)
