@@ -450,18 +450,15 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
                 f"({problem.noise['mean']:.2g} %)")
     untestable = list(untestable_why)
-    def judged_as(p: JointParams) -> tuple:
-        return judge(judged, p, model_params(p, judged.scales, params), steps, candidates,
-                     untestable_why, params, spring_stuck)
-
-    outcome, nexts, stuck, floor = judged_as(current.params)
     # the polish after each effect had one fit's budget: the named model, converged
     refit = converge_named(problem, vprob, current, params, nfev_base) if steps else None
     if refit is not None:
         conclusion += (f"; the final model refitted until it converged: NMSE "
                        f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
         current = refit
-        outcome, nexts, stuck, floor = judged_as(current.params)
+    outcome, nexts, stuck, floor = judge(
+        judged, current.params, model_params(current.params, judged.scales, params), steps,
+        candidates, untestable_why, params, spring_stuck)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
