@@ -351,10 +351,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
             _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x)
             th[a:b], out[a:b] = part[: b - a, L.TH_M], part[: b - a, L.TH_O]
             if e > b:
-                h = (b - a) // 2
-                d_angle, d_speed = O.drift(self.x_rest_angle[b - h:b + 1],
-                                           part[b - a - h:b - a + 1, L.TH_M], self.dt)
-                x = shifted(part[b - a], row, ke_on, self.ratio, d_angle, d_speed)
+                x = shifted(part[b - a], row, ke_on, self.ratio,
+                            *self._motor_drift(part[: b - a + 1], a))
         mc, oc = self.counts
         return O.channel_lines(R.quantize(th, mc), R.quantize(out, oc), self.ratio, self.dt,
                                self.cutoff, wins, self.names)

@@ -218,18 +218,19 @@ class Restarts:
 
     def _restart(self, x: np.ndarray, k: int, p: JointParams, at_rest: bool = False
                  ) -> np.ndarray:
-        """Sim state ``x`` at sample ``k`` moved onto the measured motor angle, speed, current.
+        """Sim state ``x`` at sample ``k`` moved onto the measured state: a locked output's
+        motor angle and speed (filtered; the counted angle and zero at rest), or a free
+        output at a rest point (a moving free output restarts by :meth:`_drift_restart`).
 
-        The output follows with the simulation's own torsion and torsion rate (and
-        hysteresis memory), so a restart injects no torque: only the drift of the
-        motor angle is removed. At rest with a torque sensor, the torsion is the one
-        at which the model holds the measured torque (:func:`holdable`,
-        :func:`held_torsion`).
+        At rest the speeds are zero, the motor angle is the counted one and the output
+        follows with the simulation's own torsion (and hysteresis memory); with a torque
+        sensor, the torsion is the one at which the model holds the measured torque
+        (:func:`holdable`, :func:`held_torsion`), and where it cannot hold it the model's
+        own state is kept. The current is the measured one.
         """
         r = self.ratio
         row = L.pack(p)
         ke_on = "kinematic_error" in p.effects
-        tors, rate = torsion_and_rate(x, row, ke_on, r)
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[k]
         if self.locked:  # the output stays clamped: the motor angle and speed alone move
@@ -237,33 +238,44 @@ class Restarts:
             x[L.W_M] = 0.0 if at_rest else self.x_w_m[k]
             x[L.DTH] = x[L.TH_M] / r - ke_at(row, x[L.TH_M], ke_on)[0] - x[L.TH_O]
             return x
+        if not at_rest:
+            raise ValueError("a moving free output restarts by _drift_restart")
         own = x.copy()
-        if at_rest:  # the measured joint is still: exact zero speeds, the counted angle
-            x[L.TH_M] = self.x_rest_angle[k]
-            x[L.W_M] = 0.0
-            k1, d1 = ke_at(row, x[L.TH_M], ke_on)
+        # the measured joint is still: exact zero speeds, the counted angle
+        tors = torsion_and_rate(x, row, ke_on, r)[0]
+        x[L.TH_M] = self.x_rest_angle[k]
+        x[L.W_M] = 0.0
+        k1, d1 = ke_at(row, x[L.TH_M], ke_on)
+        x[L.TH_O] = x[L.TH_M] / r - k1 - tors
+        x[L.W_O] = 0.0
+        if self.rest_torque is not None:  # and the torque it holds
+            flags = flags_of(p.effects)
+            t_load = row[L.LOAD_T] + self.t_ext[k] + row[L.GRAV] * math.sin(x[L.TH_O])
+            measured = float(self.rest_torque[np.searchsorted(self.rest_points, k)])
+            held = holdable(measured, row[L.KT] * x[L.CUR], t_load, 1 / r - d1, row,
+                            flags, x[L.TH_M], x[L.TH_O])
+            if abs(held - measured) > HOLD_TOL * max(abs(measured), 1e-12):
+                # the model cannot stand still there with the measured current and
+                # torque (a joint creeping within one encoder count as the current
+                # rises looks paused): forcing it to rest would inject the torsion of
+                # the clipped torque (on tuttle-joint2, 0.73 N m for a measured 0.015,
+                # a transmission-error offset that lasted the whole record); the
+                # model's own state is kept instead
+                return own
+            tors = held_torsion(held, x, row, flags)
             x[L.TH_O] = x[L.TH_M] / r - k1 - tors
-            x[L.W_O] = 0.0
-            if self.rest_torque is not None:  # and the torque it holds
-                flags = flags_of(p.effects)
-                t_load = row[L.LOAD_T] + self.t_ext[k] + row[L.GRAV] * math.sin(x[L.TH_O])
-                measured = float(self.rest_torque[np.searchsorted(self.rest_points, k)])
-                held = holdable(measured, row[L.KT] * x[L.CUR], t_load, 1 / r - d1, row,
-                                flags, x[L.TH_M], x[L.TH_O])
-                if abs(held - measured) > HOLD_TOL * max(abs(measured), 1e-12):
-                    # the model cannot stand still there with the measured current and
-                    # torque (a joint creeping within one encoder count as the current
-                    # rises looks paused): forcing it to rest would inject the torsion of
-                    # the clipped torque (on tuttle-joint2, 0.73 N m for a measured 0.015,
-                    # a transmission-error offset that lasted the whole record); the
-                    # model's own state is kept instead
-                    return own
-                tors = held_torsion(held, x, row, flags)
-                x[L.TH_O] = x[L.TH_M] / r - k1 - tors
-            x[L.DTH] = tors
-        else:
-            place_motor(x, row, ke_on, r, self.x_th_m[k], self.x_w_m[k], tors, rate)
+        x[L.DTH] = tors
         return x
+
+    def _motor_drift(self, part: np.ndarray, a: int) -> tuple[float, float]:
+        """The slow drift of the model's motor angle from the measured one at the end of
+        segment ``part`` (states of samples ``a`` .. ``b``, ``b`` last): ``(angle offset,
+        rad; speed offset, rad/s)`` of the straight line fitted to the measured (raw,
+        count-centred) minus the simulated motor angle over the segment's last half
+        (:func:`.orders.drift`)."""
+        b = a + part.shape[0] - 1
+        h = max((b - a) // 2, 2)
+        return drift(self.x_rest_angle[b - h:b + 1], part[-h - 1:, L.TH_M], self.dt)
 
     def _drift_restart(self, part: np.ndarray, a: int, p: JointParams) -> np.ndarray:
         """The sim state at the end of segment ``part`` (states of samples ``a`` .. ``b``,
@@ -284,20 +296,20 @@ class Restarts:
         0.02 % with the torsion's too).
         """
         b = a + part.shape[0] - 1
-        h = max((b - a) // 2, 2)
         row = L.pack(p)
-        d_angle, d_speed = drift(self.x_rest_angle[b - h:b + 1], part[-h - 1:, L.TH_M],
-                                 self.dt)
         ke_on = "kinematic_error" in p.effects
-        x = shifted(part[-1], row, ke_on, self.ratio, d_angle, d_speed)
+        d_angle, d_speed = self._motor_drift(part, a)
+        x = part[-1].copy()
+        tors, rate = torsion_and_rate(x, row, ke_on, self.ratio)
         if self.x_torque is not None:
             # with a torque sensor, the torsion's slow drift too: the line fitted to the
             # measured minus the model's torque, over the local spring slope
+            h = max((b - a) // 2, 2)
             dq, dr = drift(self.x_torque[b - h:b + 1], part[-h - 1:, L.TK], self.dt)
-            slope = spring_slope(x[L.DTH], row, flags_of(p.effects))
-            tors, rate = torsion_and_rate(x, row, ke_on, self.ratio)
-            place_motor(x, row, ke_on, self.ratio, x[L.TH_M], x[L.W_M], tors + dq / slope,
-                        rate + dr / slope)
+            slope = spring_slope(tors, row, flags_of(p.effects))
+            tors, rate = tors + dq / slope, rate + dr / slope
+        place_motor(x, row, ke_on, self.ratio, x[L.TH_M] + d_angle, x[L.W_M] + d_speed, tors,
+                    rate)
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[b]
         return x
