@@ -25,8 +25,8 @@ would give stay beside it in the tables. A miss is *honest* when the outcome say
 noise level) or lists the hidden effect as untestable rather than "nothing missing".
 
 ``python -m hdgym.discrepancy.holdout [--quick] [--set blind|holdout|both] [--seed N]
-[--only NAME ...] [--out FILE.md]`` (``--seed`` other than 14 draws a development set;
-nothing is written without ``--out``).
+[--only NAME ...] [--out FILE.md]`` (``--seed``: :data:`FRESH_SEED` is the set that judges,
+never tuned on; nothing is written without ``--out``).
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def _command(kind: str, imax: float, rng: np.random.Generator) -> tuple[str, boo
 
 
 HOLDOUT_SEED = 14
-"""Seed of the first reported hold-out set (other seeds draw development sets)."""
+"""Seed of the first hold-out set (the default ``--seed``; now a development set)."""
 DEVELOPMENT_SEEDS = (14, 26, 38)
 """Hold-out sets whose failing cases were run one by one while the workflow was changed
 (14, 26 and 38, each after its first page, all on 2026-11-26): no longer untouched."""
@@ -467,8 +467,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=None, help="write the tables (markdown) here")
     ap.add_argument("--jobs", type=int, default=1, help="cases at once (worker processes)")
     ap.add_argument("--seed", type=int, default=HOLDOUT_SEED,
-                    help="draw the hold-out cases with this seed (default %(default)s: the "
-                    "reported set; any other: a development set to tune on)")
+                    help="draw the hold-out cases with this seed (default %(default)s, a "
+                    f"development set; {FRESH_SEED}: the fresh set that judges, never tune on it)")
     args = ap.parse_args(argv)
     if args.out:
         check_out(args.out, args.quick)
