@@ -113,6 +113,7 @@ def test_converge_named_refits_a_model_whose_polish_stopped_short(monkeypatch):
     converges; kept only when the validation record does not get worse."""
     truth = preset("tuttle-joint3")
     monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    monkeypatch.setattr(S, "core_params", lambda p, scales: [])  # one start: the model's own
     t = np.linspace(0.0, 1.0, 60)
     train = _Record(truth, np.column_stack([np.sin(5 * t), np.sin(5 * t) + 0.02 * t]))
     p0 = _start(truth, 1.3, 0.75)
@@ -129,3 +130,30 @@ def test_converge_named_refits_a_model_whose_polish_stopped_short(monkeypatch):
     # a model already at its optimum is left alone
     at = FitResult(truth, {}, train.nmse(truth), 0, 0.0)
     assert S.converge_named(train, None, at, truth, 3) is None
+
+
+class _Valley(_Record):
+    """A stand-in whose residual in the stiffness's relative value ``x`` has a false
+    minimum near x = 1.68 besides the true one at x = 1 (the inertia stays exact):
+    a base fit that moved the stiffness to mimic a missing effect leaves the refit there."""
+
+    def vector(self, p, decimate=1):
+        x = get_value(p, PATHS[1]) / get_value(self.truth, PATHS[1])
+        e = get_value(p, PATHS[0]) / get_value(self.truth, PATHS[0]) - 1
+        return np.array([(x - 1) * ((x - 1.7) ** 2 + 0.05), e])
+
+
+def test_converge_named_also_starts_from_the_given_core(monkeypatch):
+    truth = preset("tuttle-joint3")
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    monkeypatch.setattr(S, "core_params", lambda p, scales: _fps(truth))
+    train = _Valley(truth, np.zeros((2, 2)))
+    moved = _start(truth, 1.0, 1.75)  # where the base fit left the stiffness
+    stuck = S.converge(train, moved, _fps(truth), 20)
+    assert get_value(stuck.params, PATHS[1]) > 1.5 * get_value(truth, PATHS[1])
+    current = FitResult(moved, {}, train.nmse(moved), 0, train.nmse(moved)["mean"] / 100)
+    out = S.converge_named(train, None, current, truth, 20)
+    assert out is not None
+    assert get_value(out.params, PATHS[1]) == pytest.approx(get_value(truth, PATHS[1]),
+                                                            rel=1e-3)
+    assert out.cost < 1e-6 * stuck.cost
