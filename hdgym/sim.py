@@ -172,14 +172,28 @@ class Simulator:
         rng = np.random.default_rng(seed)
         u = _signal(command, t, "command", rng)
         tl = _signal(load_torque, t, "load_torque", rng)
-        x = self.initial_state() if state is None else np.array(state, dtype=float)
-        states = np.empty((t.size, L.N_STATE))
-        states[0] = x
-        bad = kernel.run_open_loop(x, self.row, u[:-1], tl[:-1], self.ctrl_dt / self.n_substeps,
-                                   self.n_substeps, self.flags, states[1:])
+        x = self.initial_state() if state is None else state
+        return t, u, tl, self.states(u, tl, x)
+
+    def states(self, command: np.ndarray, load_torque: np.ndarray, state: np.ndarray
+               ) -> np.ndarray:
+        """The true states of a run from ``state`` (not changed), shape ``(n, N_STATE)``, the
+        first row ``state``: :meth:`trajectory` without its checks, for callers that run many
+        short pieces of arrays they have checked once (``command``, A, and ``load_torque``,
+        N m: finite float arrays of equal length ``n``, one value per control period).
+
+        Raises:
+            SimulationError: the run diverged (naming the state and the time).
+        """
+        out = np.empty((command.size, L.N_STATE))
+        x = np.array(state, dtype=float)
+        out[0] = x
+        bad = kernel.run_open_loop(x, self.row, command[:-1], load_torque[:-1],
+                                   self.ctrl_dt / self.n_substeps, self.n_substeps, self.flags,
+                                   out[1:])
         if bad >= 0:
-            raise SimulationError(diverged_message(states[1:], bad, self.ctrl_dt))
-        return t, u, tl, states
+            raise SimulationError(diverged_message(out[1:], bad, self.ctrl_dt))
+        return out
 
     def run_closed_loop(self, controller: Controller | Callable[[float, Mapping[str, float]],
                                                                 float],

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hdgym.discrepancy.orders import coherence, drift
+from hdgym.discrepancy.orders import coherence
 from hdgym.discrepancy.problem import Problem
+from hdgym.discrepancy.restarts import drift
 from hdgym.discrepancy.spring_search import views
 from hdgym.params import preset
 from hdgym.sim import Simulator

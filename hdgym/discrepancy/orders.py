@@ -23,7 +23,7 @@ Windows (:func:`windows`) span :data:`WINDOW_TURNS` WG turns of measured travel,
 lines and slow changes of speed show as coefficients that change from window to window.
 
 The model runs window by window without ever being put onto the measured state: at each
-window's end only its slow drift is removed (:func:`drift`: the measured minus the
+window's end only its slow drift is removed (:func:`.restarts.drift`: the measured minus the
 model's motor angle over the window's last half, fitted by a straight line, whose value
 and slope shift the model's motor angle and speed; the torsion and its rate stay the
 model's own). Multiple-shooting restarts from the filtered measured state (the time
@@ -188,22 +188,6 @@ def select(measured: dict[str, np.ndarray], noise: dict[str, float], typical_spe
         return ()
     return tuple(k for k, c in measured.items() if float(np.mean(c**2)) >= SNR**2 * noise[k]
                  and coherence(c) >= COHERENT)
-
-
-def drift(measured: np.ndarray, model: np.ndarray, dt: float) -> tuple[float, float]:
-    """The slow drift of ``model`` from ``measured`` at the end of a window.
-
-    Both are motor angles, rad, over the window's last half (the last sample is the
-    restart point); returns ``(angle offset at the last sample, rad; speed offset,
-    rad/s)`` of the straight line fitted to ``measured - model``. Over a WG turn the lines
-    average out of that fit, so what is removed is the drift, not the lines.
-    """
-    d = np.asarray(measured, dtype=float) - np.asarray(model, dtype=float)
-    if d.size < 2:
-        return (float(d[-1]) if d.size else 0.0), 0.0
-    t = (np.arange(d.size) - (d.size - 1)) * dt
-    slope, offset = np.polyfit(t, d, 1)
-    return float(offset), float(slope)
 
 
 class Lines:

@@ -145,6 +145,10 @@ class Problem(Restarts, InverseComparison, RecordScales):
                   else np.asarray(rec.motor_current, dtype=float))
         tl = rec.load_torque  # external load applied on top of the model's own load
         self.t_ext = np.zeros(len(rec)) if tl is None else np.asarray(tl, dtype=float).copy()
+        for what, v in (("current_command", self.u), ("load_torque", self.t_ext)):
+            if not np.all(np.isfinite(v)):  # the segments run unchecked (Simulator.states)
+                raise ValueError(f"{rec.source}: column {what!r} is not finite at row "
+                                 f"{int(np.flatnonzero(~np.isfinite(v))[0])}")
         raw = R.Raw(motor_angle=np.asarray(rec.motor_angle, dtype=float),
                     output_angle=None if self.locked else rec.output_angle,
                     output_torque=rec.output_torque, motor_current=rec.motor_current)
@@ -286,6 +290,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
             return self._predict_lines(p)
         p = with_sample_time(p, self.dt)
         sim = Simulator(p, locked_output=self.locked, sensors=False)
+        ke_on = "kinematic_error" in p.effects
         x0 = sim.initial_state(float(self.raw.motor_angle[0]))
         n = self.u.size
         seg = n if not self.segment else max(int(round(self.segment / self.dt)), 2)
@@ -311,14 +316,14 @@ class Problem(Restarts, InverseComparison, RecordScales):
                 if n - b < 2:
                     b, at_rest = n, False
                 e = min(b + 1, n)
-                _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x0)
+                part = sim.states(self.u[a:e], self.t_ext[a:e], x0)
                 st[a:b] = part[: b - a]
                 st[a:b, L.TH_M] -= jump[0]
                 st[a:b, L.TH_O] -= jump[1]
                 if b < n:
-                    x0 = (self._restart(part[b - a].copy(), b, p, at_rest)
+                    x0 = (self._restart(part[b - a].copy(), b, p, sim.row, at_rest)
                           if at_rest or self.locked
-                          else self._drift_restart(part[: b - a + 1], a, p))
+                          else self._drift_restart(part[: b - a + 1], a, sim.row, ke_on))
                     if at_rest and not self.locked:  # (locked: the angle is the channel)
                         jump[0] += x0[L.TH_M] - part[b - a, L.TH_M]
                         jump[1] += x0[L.TH_O] - part[b - a, L.TH_O]
@@ -333,14 +338,14 @@ class Problem(Restarts, InverseComparison, RecordScales):
         """The model's line coefficients (:mod:`.orders`), run window by window.
 
         At each window's end only the model's slow drift from the measured motor angle is
-        removed (:func:`.orders.drift`, :func:`.restarts.shifted`); the model is never put
+        removed (:func:`.restarts.drift`, :func:`.restarts.shifted`); the model is never put
         onto the filtered measured state, so its lines stay its own and no restart error
         rings into them. Each window's lines are taken against the model's own WG angle.
         """
         lines = self._lines
         p = with_sample_time(p, self.dt)
         sim = Simulator(p, locked_output=False, sensors=False)
-        row, ke_on = L.pack(p), "kinematic_error" in p.effects
+        row, ke_on = sim.row, "kinematic_error" in p.effects
         x = sim.initial_state(float(self.raw.motor_angle[0]))
         n = self.u.size
         wins = lines.wins
@@ -348,7 +353,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
         out = np.empty(th.size)
         for a, b in wins:
             e = min(b + 1, n)
-            _, _, _, part = sim.trajectory(self.u[a:e], load_torque=self.t_ext[a:e], state=x)
+            part = sim.states(self.u[a:e], self.t_ext[a:e], x)
             th[a:b], out[a:b] = part[: b - a, L.TH_M], part[: b - a, L.TH_O]
             if e > b:
                 x = shifted(part[b - a], row, ke_on, self.ratio,

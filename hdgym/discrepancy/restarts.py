@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 from hdgym.effects import BIT, flags_of
@@ -22,7 +23,6 @@ from hdgym.physics import layout as L
 from hdgym.record import Record
 
 from . import residuals as R
-from .orders import drift
 
 REST_PAUSE = 0.03
 """Seconds without an encoder count that make a pause (a restart point, see :class:`Problem`)."""
@@ -123,19 +123,24 @@ def torsion_for(torque: float, x: np.ndarray, row: np.ndarray, flags: int,
     return 0.5 * (lo + hi)
 
 
+_njit = nb.njit(cache=True, nogil=True)  # a restart's arithmetic runs 10^5 times a diagnosis
+
+
+@_njit
 def ke_at(row: np.ndarray, th: float, on: bool) -> tuple[float, float]:
     """Kinematic error (output rad) and its slope in the WG angle at WG angle ``th``, rad
     (``row``: packed parameters; ``on``: the effect is on)."""
-    if not on:
-        return 0.0, 0.0
-    v = d = 0.0
-    for j in range(int(row[L.NKE])):
-        a = row[L.KE_ORD + j] * th + row[L.KE_PH + j]
-        v += row[L.KE_AMP + j] * math.sin(a)
-        d += row[L.KE_AMP + j] * row[L.KE_ORD + j] * math.cos(a)
+    v = 0.0
+    d = 0.0
+    if on:
+        for j in range(int(row[L.NKE])):
+            a = row[L.KE_ORD + j] * th + row[L.KE_PH + j]
+            v += row[L.KE_AMP + j] * math.sin(a)
+            d += row[L.KE_AMP + j] * row[L.KE_ORD + j] * math.cos(a)
     return v, d
 
 
+@_njit
 def torsion_and_rate(x: np.ndarray, row: np.ndarray, ke_on: bool,
                      ratio: float) -> tuple[float, float]:
     """The torsion (output rad) of sim state ``x`` and its rate (rad/s)."""
@@ -143,6 +148,7 @@ def torsion_and_rate(x: np.ndarray, row: np.ndarray, ke_on: bool,
     return x[L.TH_M] / ratio - x[L.TH_O] - k0, x[L.W_M] * (1 / ratio - d0) - x[L.W_O]
 
 
+@_njit
 def place_motor(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, angle: float,
                 speed: float, tors: float, rate: float) -> None:
     """Put sim state ``x``'s motor at ``angle`` (rad) and ``speed`` (rad/s), in place; the
@@ -155,6 +161,7 @@ def place_motor(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, angle
     x[L.DTH] = tors
 
 
+@_njit
 def shifted(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, d_angle: float,
             d_speed: float) -> np.ndarray:
     """Sim state ``x`` with the motor angle moved by ``d_angle`` (rad) and the motor speed by
@@ -163,6 +170,36 @@ def shifted(x: np.ndarray, row: np.ndarray, ke_on: bool, ratio: float, d_angle: 
     tors, rate = torsion_and_rate(x, row, ke_on, ratio)
     place_motor(x, row, ke_on, ratio, x[L.TH_M] + d_angle, x[L.W_M] + d_speed, tors, rate)
     return x
+
+
+@_njit
+def drift(measured: np.ndarray, model: np.ndarray, dt: float) -> tuple[float, float]:
+    """The slow drift of ``model`` from ``measured`` at the end of a window.
+
+    Both are motor angles, rad, over the window's last half (the last sample is the
+    restart point); returns ``(angle offset at the last sample, rad; speed offset,
+    rad/s)`` of the straight line fitted to ``measured - model`` (least squares). Over a
+    WG turn the lines average out of that fit, so what is removed is the drift, not the
+    lines.
+    """
+    n = measured.size
+    if n == 0:
+        return 0.0, 0.0
+    if n < 2:
+        return measured[n - 1] - model[n - 1], 0.0
+    mid = 0.5 * (n - 1)
+    mean = 0.0
+    for k in range(n):
+        mean += measured[k] - model[k]
+    mean /= n
+    num = 0.0
+    den = 0.0
+    for k in range(n):
+        t = k - mid
+        num += t * (measured[k] - model[k])
+        den += t * t
+    slope = num / den
+    return mean + slope * mid, slope / dt
 
 
 class Restarts:
@@ -230,8 +267,8 @@ class Restarts:
         self.rest_torque = np.asarray(held) if torque is not None else None
         return np.asarray(out, dtype=int)
 
-    def _restart(self, x: np.ndarray, k: int, p: JointParams, at_rest: bool = False
-                 ) -> np.ndarray:
+    def _restart(self, x: np.ndarray, k: int, p: JointParams, row: np.ndarray,
+                 at_rest: bool = False) -> np.ndarray:
         """Sim state ``x`` at sample ``k`` moved onto the measured state: a locked output's
         motor angle and speed (filtered; the counted angle and zero at rest), or a free
         output at a rest point (a moving free output restarts by :meth:`_drift_restart`).
@@ -240,10 +277,10 @@ class Restarts:
         follows with the simulation's own torsion (and hysteresis memory); with a torque
         sensor, the torsion is the one at which the model holds the measured torque
         (:func:`holdable`, :func:`torsion_for`), and where it cannot hold it the model's
-        own state is kept. The current is the measured one.
+        own state is kept. The current is the measured one. ``row``: ``p`` packed
+        (:func:`hdgym.physics.layout.pack`).
         """
         r = self.ratio
-        row = L.pack(p)
         ke_on = "kinematic_error" in p.effects
         if self.x_cur is not None:
             x[L.CUR] = self.x_cur[k]
@@ -286,18 +323,21 @@ class Restarts:
         segment ``part`` (states of samples ``a`` .. ``b``, ``b`` last): ``(angle offset,
         rad; speed offset, rad/s)`` of the straight line fitted to the measured (raw,
         count-centred) minus the simulated motor angle over the segment's last half
-        (:func:`.orders.drift`)."""
+        (:func:`drift`)."""
         b = a + part.shape[0] - 1
         h = max((b - a) // 2, 2)
         return drift(self.x_rest_angle[b - h:b + 1], part[-h - 1:, L.TH_M], self.dt)
 
-    def _drift_restart(self, part: np.ndarray, a: int, p: JointParams) -> np.ndarray:
+    def _drift_restart(self, part: np.ndarray, a: int, row: np.ndarray, ke_on: bool
+                       ) -> np.ndarray:
         """The sim state at the end of segment ``part`` (states of samples ``a`` .. ``b``,
         the restart point ``b`` last) with only its slow drift from the measured motor angle
         removed: the straight line fitted to the measured (raw, count-centred) minus the
-        simulated motor angle over the segment's last half (:func:`.orders.drift`) moves the
+        simulated motor angle over the segment's last half (:func:`drift`) moves the
         motor angle and speed (:func:`shifted`). The torsion and its rate, the hysteresis
         memory and the model's own ringing stay, and the current is the measured one.
+        ``row``: the model's packed parameters (:func:`hdgym.physics.layout.pack`);
+        ``ke_on``: its kinematic error is on.
 
         The torsion is not moved towards a torque sensor's reading: a line fitted to the
         measured minus the model's torque over the segment's end also fits the ringing, and
@@ -317,8 +357,6 @@ class Restarts:
         measured on the earlier validation records).
         """
         b = a + part.shape[0] - 1
-        row = L.pack(p)
-        ke_on = "kinematic_error" in p.effects
         d_angle, d_speed = self._motor_drift(part, a)
         x = shifted(part[-1], row, ke_on, self.ratio, d_angle, d_speed)
         if self.x_cur is not None:
