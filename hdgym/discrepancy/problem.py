@@ -145,10 +145,8 @@ class Problem(Restarts, InverseComparison, RecordScales):
                   else np.asarray(rec.motor_current, dtype=float))
         tl = rec.load_torque  # external load applied on top of the model's own load
         self.t_ext = np.zeros(len(rec)) if tl is None else np.asarray(tl, dtype=float).copy()
-        for what, v in (("current_command", self.u), ("load_torque", self.t_ext)):
-            if not np.all(np.isfinite(v)):  # the segments run unchecked (Simulator.states)
-                raise ValueError(f"{rec.source}: column {what!r} is not finite at row "
-                                 f"{int(np.flatnonzero(~np.isfinite(v))[0])}")
+        # finite: a Record holds no NaN or inf (it checks on construction), so the
+        # segments run on them unchecked (Simulator.states)
         raw = R.Raw(motor_angle=np.asarray(rec.motor_angle, dtype=float),
                     output_angle=None if self.locked else rec.output_angle,
                     output_torque=rec.output_torque, motor_current=rec.motor_current)
