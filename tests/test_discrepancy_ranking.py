@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 from hdgym.discrepancy import cases
+from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.discrepancy.problem import Problem
 from hdgym.discrepancy.ranking import rank_candidates
+from hdgym.params import preset
+from hdgym.sim import Simulator
 
 
 def test_order_line_candidates_get_a_newton_start_only_when_asked():
@@ -23,3 +26,24 @@ def test_order_line_candidates_get_a_newton_start_only_when_asked():
     # only order-line candidates get one
     assert all(c["_newton"] is None for n, c in with_newton.items()
                if n not in ("kinematic_error", "position_dependent_friction"))
+
+
+def test_candidate_is_also_started_from_the_given_base():
+    # a base fit that moved its parameters to mimic a clipped current (more motor inertia,
+    # more output damping) sits where switching the amplifier limits on makes things worse;
+    # from the given base values, the same limits explain nearly all of the residual
+    truth = preset("tuttle-joint1")
+    given = truth.set("effects", tuple(e for e in truth.effects if e != "amplifier_saturation"))
+    rec = Simulator(truth).run("sine:7.8:1", 2.0, seed=3)
+    prob = Problem(rec, given)
+    prob.segment = 0.1
+    moved = set_values(given, {
+        "motor.inertia": 1.4 * get_value(given, "motor.inertia"),
+        "friction.output.viscous": 1.5 * get_value(given, "friction.output.viscous")})
+
+    def amp(reset):
+        ranked = rank_candidates(prob, moved, given, False, reset)
+        return next(c for c in ranked if c["name"] == "amplifier_saturation")
+
+    assert amp(None)["sensitivity_explained"] < 0.03
+    assert amp(given)["sensitivity_explained"] > 0.9

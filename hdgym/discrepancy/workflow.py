@@ -155,7 +155,8 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     relative improvement)`` or None, ``reason`` why nothing passed.
     """
     params = given
-    candidates = rank_candidates(problem, current.params, params, newton)
+    candidates = rank_candidates(problem, current.params, params, newton,
+                                 _reset(current.params, params, base_paths))
     if not candidates:
         return None, "every testable effect is already in the model", candidates
     trials = []
