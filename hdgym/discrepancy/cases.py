@@ -298,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
         "hidden, when nothing is named.",
         "",
         f"Adding rule: relative cost reduction >= {100 * THRESHOLD:.0f} %, mean NMSE drop >= "
-        f"{MIN_GAIN:g} points and validation NMSE down by >= {100 * VALIDATION_GAIN:.0f} % "
+        f"{MIN_GAIN:g} points, validation NMSE down by >= {100 * VALIDATION_GAIN:.0f} % "
+        "(geometric mean of the channels' ratios) and its mean down "
         "(`hdgym.discrepancy.workflow.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
         "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
         "preferred to Stribeck friction when it achieves >= 75 % of its improvement "

@@ -27,6 +27,8 @@ that neither a missing effect nor the record's noise made:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from hdgym.params import JointParams
@@ -146,22 +148,27 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     stiffness from 23,060 to 25,530 N m/rad to carry the torque ripple, the refit from there
     to 30,410 at 11.3 % NMSE; from the given values it reached 2.95 %. The 60 s record of
     the bench, tuttle-joint3 / kinematic_error / step:0.30: 5.9 % against 0.033 %).
-    Returns the cheaper refit when it lowers the training cost and, with a validation
-    record, does not raise its mean NMSE; else None.
+    Returns the refit from the cheaper start when it lowers the training cost and, with a
+    validation record, does not raise its mean NMSE, else the other start's when that one
+    does; else None (hold-out hduc20 / kinematic_error / sine:3.38:1, seed 38: the given
+    core's start was cheaper on the training record but raised the validation NMSE; from
+    the model as it stood it did not).
     """
     fps = model_params(current.params, problem.scales, given)
     core = {fp.path: get_value(given, fp.path) for fp in core_params(given, problem.scales)}
-    # one round from each start, further rounds from the cheaper one only (each round is
-    # one fit's budget: a diagnosis of a 60 s record has to stay under 60 s)
-    first = min((fit(problem, q, fps, max_nfev=nfev, coarse=True)
-                 for q in (current.params, set_values(current.params, core))),
-                key=lambda r: r.cost)
-    refit = converge(problem, first.params, fps, nfev, rounds=SETTLE_ROUNDS - 1)
-    refit = refit if refit.cost < first.cost else first
-    if not refit.cost < current.cost:
-        return None
-    if vprob is not None and not (vprob.nmse(refit.params)["mean"]
-                                  <= vprob.nmse(current.params)["mean"]):
-        return None
-    return FitResult(refit.params, {**current.values, **refit.values}, refit.nmse,
-                     refit.nfev, refit.cost)
+    # one round from each start, further rounds from the cheaper one first (each round is
+    # one fit's budget: a diagnosis of a 60 s record has to stay under 60 s), and from the
+    # other only when the first's refit is refused
+    v0 = vprob.nmse(current.params)["mean"] if vprob is not None else math.inf
+    firsts = sorted((fit(problem, q, fps, max_nfev=nfev, coarse=True)
+                     for q in (current.params, set_values(current.params, core))),
+                    key=lambda r: r.cost)
+    for first in firsts:
+        if not first.cost < current.cost:
+            continue
+        refit = converge(problem, first.params, fps, nfev, rounds=SETTLE_ROUNDS - 1)
+        refit = refit if refit.cost < first.cost else first
+        if vprob is None or vprob.nmse(refit.params)["mean"] <= v0:
+            return FitResult(refit.params, {**current.values, **refit.values}, refit.nmse,
+                             refit.nfev, refit.cost)
+    return None

@@ -13,7 +13,7 @@
    :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
    percentage points; polished, also against the base model polished alike), and,
    when a validation record is given, if it also lowers the validation NMSE by
-   :data:`VALIDATION_GAIN`. Repeat until no
+   :data:`VALIDATION_GAIN` per channel and its mean. Repeat until no
    candidate passes; then say that nothing (more) is missing rather than
    invent an effect.
 
@@ -39,8 +39,6 @@ import math
 import time as _time
 from dataclasses import replace
 
-import numpy as np
-
 from hdgym.params import JointParams
 from hdgym.progress import bar
 from hdgym.record import Record
@@ -49,7 +47,7 @@ from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
-from .outcome import NOISE_FACTOR, judge
+from .outcome import NOISE_FACTOR, carries_over, judge
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
@@ -65,7 +63,7 @@ MIN_SCORE = 0.03
 """Least share of the residual a linearized refit must explain for a trial refit."""
 VALIDATION_GAIN = 0.1
 """With a validation record, an effect must also cut its NMSE by this share (10 %, geometric
-mean over channels of the NMSE ratio)."""
+mean over channels of the NMSE ratio), and its mean (:func:`.outcome.carries_over`)."""
 TOP_K = 3
 NESTED = {"stribeck_friction": "stiction"}
 """Effect -> simpler effect that is its limit case (preferred when it does nearly as well)."""
@@ -212,20 +210,15 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
             continue
         if vprob is not None:
             # hold-out check: an effect that fits the training record better but does not
-            # carry over to the validation record fits noise or the fit's slack; per
-            # channel and scale-free (geometric mean of the NMSE ratios), so a channel
-            # with a tiny variance cannot decide alone
+            # carry over to the validation record fits noise or the fit's slack
             v_now = vprob.nmse(current.params)
             v_new = vprob.nmse(polished.params)
-            ratios = [v_new[k] / v_now[k] for k in vprob.names
-                      if v_now[k] > 0 and math.isfinite(v_now[k])]
-            ratio = (float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-12)))))
-                     if ratios else 1.0)
-            if not ratio <= 1.0 - VALIDATION_GAIN:
+            ok, ratio = carries_over(v_now, v_new, vprob.names, VALIDATION_GAIN)
+            if not ok:
                 reasons.append(f"{best['name']} cuts the training cost by {100 * rel:.1f} % "
                                f"but the validation NMSE only by a factor {ratio:.2f} per "
-                               f"channel (geometric mean; needs <= "
-                               f"{1 - VALIDATION_GAIN:.2f})")
+                               f"channel (geometric mean; needs <= {1 - VALIDATION_GAIN:.2f}"
+                               f"), its mean {v_now['mean']:.3g} -> {v_new['mean']:.3g} %")
                 continue
             cut = 1.0 - v_new["mean"] / v_now["mean"] if v_now["mean"] > 0 else 0.0
             why = FF.short_of(vprob, current.params, polished.params, best, cut, mean_gain)
