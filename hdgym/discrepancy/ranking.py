@@ -117,8 +117,10 @@ def rank_candidates(problem: Problem, current: JointParams,
     switching the effect on only makes things worse (hold-out tuttle-joint1 /
     amplifier_saturation / sine:7.8:1, seed 50: the base fit went from 72.8 to 27.1 % NMSE
     by moving the kinematic error and friction; the limits the record shows then raised it
-    to 68 %, while from the given values they cut it to 4.7 %). Candidates are ranked by
-    the sensitivity score (the signature score breaks ties and is reported as evidence).
+    to 68 %, while from the given values they cut it to 4.7 %). Both starts are kept in the
+    entry (``_start``, ``_reset_start``; None where a start failed) for the trial refit
+    (:func:`.workflow._trial`). Candidates are ranked by the sensitivity score (the
+    signature score breaks ties and is reported as evidence).
     """
     res = problem.residuals(current)
     r0 = _stack(problem, res)
@@ -140,7 +142,7 @@ def rank_candidates(problem: Problem, current: JointParams,
                else {"kind": eff.signature, "explained": 0.0})  # (coefficients: no samples)
         sens = 0.0
         size = math.nan
-        nstart = None
+        nstart = q = q_reset = None
         feat: dict = {}
         try:  # how much the effect, at the size the record suggests, changes the channels
             d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
@@ -156,9 +158,6 @@ def rank_candidates(problem: Problem, current: JointParams,
             cols = [c for *_, c in base_cols] + [on - r0] + [c for *_, c in own]
             lin = R._lstsq_explained(-r0, np.column_stack(cols))[0] - base_frac
             sens = max(lin, start_gain, 0.0)
-            if reset is not None:
-                on2 = _stack(problem, problem.residuals(_start(problem, reset, name)))
-                sens = max(sens, 1.0 - float(on2 @ on2) / max(float(r0 @ r0), 1e-300))
             # friction: what the phase-free features say (a feature fit of its own parameters)
             feat = FF.candidate_entry(problem, current, q, own_fps, name)
             if newton and any(fp.path.endswith((".sin", ".cos")) for fp in own_fps):
@@ -166,11 +165,19 @@ def rank_candidates(problem: Problem, current: JointParams,
                 nstart = _newton_start(problem, q, on, base_cols + own, base_fps + own_fps)
         except (SimulationError, ValueError):
             pass
+        if reset is not None:
+            try:
+                q_reset = _start(problem, reset, name)
+                on2 = _stack(problem, problem.residuals(q_reset))
+                sens = max(sens, 1.0 - float(on2 @ on2) / max(float(r0 @ r0), 1e-300))
+            except (SimulationError, ValueError):
+                q_reset = None
         out.append({"name": name, "signature": eff.signature,
                     "signature_explained": round(sig["explained"], 4),
                     "sensitivity_explained": round(sens, 4),
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
-                    "size_nmse": size, "_newton": nstart, **feat})
+                    "size_nmse": size, "_newton": nstart, "_start": q,
+                    "_reset_start": q_reset, **feat})
     out.sort(key=lambda c: -c["score"])
     if newton:  # the escalated horizons: friction is also ranked by its features
         FF.rank_by_features(out)

@@ -226,8 +226,6 @@ class Restarts:
         self.x_cur = (R.lowpass(self.raw.motor_current, self.dt, self.cutoff)
                       if self.raw.motor_current is not None else None)
         self.x_rest_angle = np.asarray(self.raw.motor_angle, dtype=float) + qm / 2
-        self.x_torque = (None if self.raw.output_torque is None
-                         else np.asarray(self.raw.output_torque, dtype=float))
         self.rest_points = self._rest_points()
         self.stick_slip = bool(self.rest_points.size)
 

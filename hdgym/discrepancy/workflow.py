@@ -90,8 +90,11 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     # two starts: the current fit, and the given values of the base parameters (a base
     # fit may have wandered off to mimic the missing effect); keep the cheaper start or,
     # where stick-slip makes the cost at a start a poor guide, the better of both fits
-    q = _start(problem, current.params, cand["name"])
-    q2 = _start(problem, _reset(current.params, given, base_paths), cand["name"])
+    # (the ranking found both for the same model; computed here only where it could not)
+    q, q2 = cand.get("_start"), cand.get("_reset_start")
+    q = _start(problem, current.params, cand["name"]) if q is None else q
+    q2 = (_start(problem, _reset(current.params, given, base_paths), cand["name"])
+          if q2 is None else q2)
     if problem.stick_slip:  # the cost at a start is a poor guide: fit from both
         starts = [q, q2]
     else:
