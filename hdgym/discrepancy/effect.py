@@ -161,6 +161,9 @@ class Effect:
         sized: ``sized(scales)`` -> whether :meth:`switch_on` reads its size
             parameters (those with lower bound 0) from the record; the trial start
             then searches near them instead of over their whole range.
+        forms: further named ways to switch it on, each a switch-on function like the
+            default one (a hardening spring as a cubic or with a knee): the trial start
+            (:func:`.ranking._start`) tries every form and keeps the cheapest.
     """
 
     name: str
@@ -176,6 +179,8 @@ class Effect:
     compare: tuple[str, ...] = ("time",)
     sized: Callable[[Scales], bool] = field(default=lambda s: False, repr=False)
     refit: tuple[Condition, ...] = ()
+    forms: tuple[tuple[str, Callable[[JointParams, Scales], dict[str, Any]]], ...] = field(
+        default=(), repr=False)
 
     def why_not(self, s: Scales) -> str | None:
         """Why a record with scales ``s`` cannot reveal this effect (None: it can)."""
@@ -198,10 +203,18 @@ class Effect:
             out.append(FitParam(fp.path, lo, hi, fp.guess))
         return out
 
-    def switch_on(self, p: JointParams, s: Scales) -> JointParams:
-        """``p`` with this effect (and what it requires) on, at data-scaled initial guesses."""
+    def form_names(self) -> tuple[str | None, ...]:
+        """The forms :meth:`switch_on` takes: None (the default) and each of ``forms``."""
+        return (None, *(name for name, _ in self.forms))
+
+    def switch_on(self, p: JointParams, s: Scales, form: str | None = None) -> JointParams:
+        """``p`` with this effect (and what it requires) on, at data-scaled initial guesses
+        (``form``: one of :attr:`forms` by name instead of the default)."""
+        on = self._on if form is None else dict(self.forms).get(form)
+        if on is None:
+            raise ValueError(f"effect {self.name!r} has no form {form!r}")
         d = to_dict(p)
-        for path, value in self._on(p, s).items():
+        for path, value in on(p, s).items():
             if path.startswith("@"):  # structural replacement of a whole table or list
                 assign(d, path[1:], value)
             else:

@@ -129,6 +129,16 @@ def _nl_on(p, s):
             "compliance.cubic": 0.05 * c.stiffness / max(s.torsion, 1e-9) ** 2}
 
 
+def _nl_knee(p, s):
+    """A hardening spring with a knee (two segments): stiffer by ``extra_stiffness`` above
+    the torsion ``knee`` (the segmented springs of docs/physics.md, which a cubic bends
+    through: the hold-out wave-drive-50 / nonlinear_stiffness, locked, seed 62)."""
+    c = p.compliance
+    return {"@compliance.model": "two_segment", "compliance.cubic": 0.0,
+            "compliance.knee": 0.3 * max(s.torsion, 1e-9),
+            "compliance.extra_stiffness": c.stiffness}
+
+
 def _nl_neutral(d):
     c = d["compliance"]
     c["cubic"] = 0.0
@@ -169,7 +179,8 @@ GEAR_EFFECTS: tuple[Effect, ...] = (
            "hardening flexspline spring: residual cubic in the torsion",
            _nl_params, _nl_on, _nl_neutral, seen=(SIMULATED, TORSION, HIGH_TORQUE),
            channels="motor angle (locked) or transmission error against torque",
-           protocol="locked_random", compare=("time", "spring")),
+           protocol="locked_random", compare=("time", "spring"),
+           forms=(("knee", _nl_knee),)),
     Effect("hysteresis", "torsion_loops",
            "hysteresis in the torsion: residual loops against torsion (Maxwell slip)",
            _hyst_params, _hyst_on, _hyst_neutral, seen=(SIMULATED, TORSION, REVERSALS),

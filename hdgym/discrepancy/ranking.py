@@ -118,9 +118,10 @@ def rank_candidates(problem: Problem, current: JointParams,
     amplifier_saturation / sine:7.8:1, seed 50: the base fit went from 72.8 to 27.1 % NMSE
     by moving the kinematic error and friction; the limits the record shows then raised it
     to 68 %, while from the given values they cut it to 4.7 %). Both starts are kept in the
-    entry (``_start``, ``_reset_start``; None where a start failed) for the trial refit
-    (:func:`.workflow._trial`). Candidates are ranked by the sensitivity score (the
-    signature score breaks ties and is reported as evidence).
+    entry (``_start``, ``_reset_start``; None where a start failed; ``_forms``: the starts of
+    the candidate's other forms) for the trial refit (:func:`.workflow._trial`). Candidates
+    are ranked by the sensitivity score (the signature score breaks ties and is reported as
+    evidence).
     """
     res = problem.residuals(current)
     r0 = _stack(problem, res)
@@ -143,6 +144,7 @@ def rank_candidates(problem: Problem, current: JointParams,
         sens = 0.0
         size = math.nan
         nstart = q = q_reset = None
+        forms: list[JointParams] = []
         feat: dict = {}
         try:  # how much the effect, at the size the record suggests, changes the channels
             d0 = _stack(problem, problem.residuals(eff.switch_on(current, problem.scales))) - r0
@@ -150,7 +152,7 @@ def rank_candidates(problem: Problem, current: JointParams,
         except (SimulationError, ValueError):
             pass
         try:
-            q = _start(problem, current, name)
+            q, *forms = _form_starts(problem, current, name)
             on = _stack(problem, problem.residuals(q))
             start_gain = 1.0 - float(on @ on) / max(float(r0 @ r0), 1e-300)
             own_fps = eff.fit_params(q, problem.scales)
@@ -177,7 +179,7 @@ def rank_candidates(problem: Problem, current: JointParams,
                     "sensitivity_explained": round(sens, 4),
                     "score": round(sens + 1e-3 * sig["explained"], 4), "detail": sig,
                     "size_nmse": size, "_newton": nstart, "_start": q,
-                    "_reset_start": q_reset, **feat})
+                    "_reset_start": q_reset, "_forms": forms, **feat})
     out.sort(key=lambda c: -c["score"])
     if newton:  # the escalated horizons: friction is also ranked by its features
         FF.rank_by_features(out)
@@ -185,19 +187,41 @@ def rank_candidates(problem: Problem, current: JointParams,
 
 
 def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
-    """Switch ``name`` on and pick the cheapest start on a coarse grid of its size.
+    """Switch ``name`` on and pick the cheapest start on a coarse grid of its size, over
+    each of its forms (:func:`_form_starts`)."""
+    return _form_starts(problem, p, name)[0]
+
+
+def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParams]:
+    """The start of each form of ``name`` (:attr:`.effect.Effect.forms`, :func:`_start_form`),
+    cheapest first. (The cheapest start need not fit best: a cubic truth's spring started
+    closer as a knee on the tuned case hysteresis+nonlinear_stiffness, and fitted worse.)"""
+    starts = [_start_form(problem, p, name, form) for form in REGISTRY[name].form_names()]
+    if len(starts) == 1:
+        return starts
+    return sorted(starts, key=lambda q: problem.nmse(q)["mean"])
+
+
+SHAPE_GRID = (0.02, 0.1, 0.4)
+"""Shares of their range tried for the shape parameters that set where an effect acts (the
+Stribeck velocity, a spring's knee), beside the size grid of :func:`_start_form`."""
+
+
+def _start_form(problem: Problem, p: JointParams, name: str, form: str | None) -> JointParams:
+    """Switch ``name`` on in ``form`` and pick the cheapest start on a coarse grid of its size.
 
     Friction with stick-slip makes the cost narrow-valleyed in the static
     friction level, so a gradient method started far away stalls: every
     size-like parameter (lower bound 0) is set to the same fraction of its
     range on a geometric grid (shape parameters such as Maxwell-slip
-    stiffness or the Stribeck velocity take a few values); parameters with
+    stiffness, the Stribeck velocity or a knee take a few values); parameters with
     a data-based guess (order lines, amplifier limits) are scaled around it.
     """
     eff = REGISTRY[name]
-    q = eff.switch_on(p, problem.scales)
+    q = eff.switch_on(p, problem.scales, form)
     fps = eff.fit_params(q, problem.scales)
-    shape = [fp for fp in fps if fp.path.endswith(("element_stiffness]", "stribeck_velocity"))
+    gridded = ("stribeck_velocity", "compliance.knee")  # (the shapes SHAPE_GRID sets)
+    shape = [fp for fp in fps if fp.path.endswith(("element_stiffness]", *gridded))
              or "element_stiffness[" in fp.path]
     size = [fp for fp in fps if fp not in shape and fp.lower == 0.0]
     rest = [fp for fp in fps if fp not in shape and fp not in size]
@@ -210,9 +234,9 @@ def _start(problem: Problem, p: JointParams, name: str) -> JointParams:
                           else (np.geomspace(1e-3, 0.8, 12), (1e-3, 0.8)))
     if size:
         shapes: list[dict[str, float]] = [{}]
-        if any(fp.path.endswith("stribeck_velocity") for fp in shape):
+        if any(fp.path.endswith(gridded) for fp in shape):
             shapes = [{fp.path: fp.lower + g * (fp.upper - fp.lower) for fp in shape
-                       if fp.path.endswith("stribeck_velocity")} for g in (0.02, 0.1, 0.4)]
+                       if fp.path.endswith(gridded)} for g in SHAPE_GRID]
         for f in grid:
             for sh in shapes:
                 trials.append(({**{fp.path: f * unit[fp.path] for fp in size}, **sh},

@@ -1,0 +1,46 @@
+"""An effect with several forms: the trial start tries each (a hardening spring as a cubic
+or with a knee) and keeps the cheapest."""
+
+from __future__ import annotations
+
+import pytest
+
+from hdgym.discrepancy.problem import Problem
+from hdgym.discrepancy.ranking import _start, _start_form
+from hdgym.discrepancy.registry import REGISTRY
+from hdgym.params import preset
+from hdgym.record import Record
+from hdgym.sim import Simulator
+
+
+def test_the_spring_switches_on_as_a_cubic_or_with_a_knee():
+    eff = REGISTRY["nonlinear_stiffness"]
+    assert eff.form_names() == (None, "knee")
+    given = eff.neutral(preset("wave-drive-50").without("nonlinear_stiffness"))
+    rec = Simulator(preset("wave-drive-50"), locked_output=True).run("sine:0.458:1", 0.5,
+                                                                     seed=1)
+    s = Problem(Record(dict(rec.columns), dict(rec.meta), "locked sine"), given).scales
+    cubic, knee = eff.switch_on(given, s), eff.switch_on(given, s, "knee")
+    assert cubic.compliance.model == "cubic" and cubic.compliance.cubic > 0
+    assert knee.compliance.model == "two_segment" and knee.compliance.cubic == 0
+    assert knee.compliance.knee > 0 and knee.compliance.extra_stiffness > 0
+    assert "nonlinear_stiffness" in knee.effects
+    with pytest.raises(ValueError, match="nonlinear_stiffness.*'bend'"):
+        eff.switch_on(given, s, "bend")
+
+
+def test_the_trial_start_finds_the_knee_of_a_segmented_spring():
+    """wave-drive-50's spring is stiffer above a knee (two segments): on the spring curve of
+    a locked record the knee form starts closer than the cubic one, and the trial start
+    keeps it (the hold-out case wave-drive-50 / nonlinear_stiffness, locked, seed 62)."""
+    truth = preset("wave-drive-50")
+    run = Simulator(truth, locked_output=True).run("sine:0.458:1", 2.0, seed=1)
+    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
+    given = REGISTRY["nonlinear_stiffness"].neutral(truth.without("nonlinear_stiffness"))
+    prob = Problem(rec, given, segment=0.5)
+    prob.set_compare("spring")
+    cubic = _start_form(prob, given, "nonlinear_stiffness", None)
+    best = _start(prob, given, "nonlinear_stiffness")
+    assert best.compliance.model == "two_segment"
+    assert prob.nmse(best)["mean"] < 0.7 * prob.nmse(cubic)["mean"]
+    assert prob.nmse(best)["mean"] < 0.7 * prob.nmse(given)["mean"]
