@@ -366,7 +366,11 @@ def main(argv: list[str] | None = None) -> int:
         "simulated in one run (`hdgym.discrepancy.spring`); the noise averages out there and "
         "the bend a refitted linear stiffness leaves stays. An effect found there is reported "
         "on the curve; a curve left above its noise with such an effect missing and "
-        "explaining part of it is *unexplained*.",
+        "explaining part of it is *unexplained*. Trial refits there get 3 x the trial "
+        "budget and the coarse difference step (`SPRING_TRIAL`; the curve is a staircase "
+        "in the parameters). A hardening spring is tried, on the curve and the time "
+        "channels, in two forms, a cubic and a knee "
+        "(two segments; `Effect.forms`): the trial refit starts from each.",
         "- On a free output whose time channels show nothing, with kinematic error or "
         "position-dependent friction missing, the line channels are searched the same way "
         "where the record has them (`hdgym.discrepancy.orders`): what the filter removes "
