@@ -44,3 +44,23 @@ def test_the_trial_start_finds_the_knee_of_a_segmented_spring():
     assert best.compliance.model == "two_segment"
     assert prob.nmse(best)["mean"] < 0.7 * prob.nmse(cubic)["mean"]
     assert prob.nmse(best)["mean"] < 0.7 * prob.nmse(given)["mean"]
+
+
+def test_the_trial_start_scales_the_maxwell_elements(monkeypatch):
+    """tuttle-joint1's Maxwell-slip elements are 0.02-0.09 x its spring's stiffness, the
+    registry's guess 0.05-0.5 x: on the spring curve of a locked record the start found with
+    the elements scaled (ELEMENT_GRID) is cheaper than the one at the guess alone."""
+    from hdgym.discrepancy import ranking
+
+    truth = preset("tuttle-joint1")
+    run = Simulator(truth, locked_output=True).run("sine:2.98:0.5", 2.0, seed=1)
+    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
+    given = REGISTRY["hysteresis"].neutral(truth.without("hysteresis"))
+    prob = Problem(rec, given, segment=0.5)
+    prob.set_compare("spring")
+    scaled = _start(prob, given, "hysteresis")
+    monkeypatch.setattr(ranking, "ELEMENT_GRID", (1.0,))
+    guess = _start(prob, given, "hysteresis")
+    k_s, k_g = scaled.hysteresis.element_stiffness, guess.hysteresis.element_stiffness
+    assert all(a < b for a, b in zip(k_s, k_g, strict=True))
+    assert prob.nmse(scaled)["mean"] < 0.3 * prob.nmse(guess)["mean"]
