@@ -8,7 +8,7 @@ import pytest
 from hdgym.discrepancy.problem import Problem
 from hdgym.discrepancy.ranking import _start, _start_form
 from hdgym.discrepancy.registry import REGISTRY
-from hdgym.params import preset
+from hdgym.params import JointParams, preset
 from hdgym.record import Record
 from hdgym.sim import Simulator
 
@@ -29,16 +29,23 @@ def test_the_spring_switches_on_as_a_cubic_or_with_a_knee():
         eff.switch_on(given, s, "bend")
 
 
+def _spring_curve(name: str, hidden: str, command: str) -> tuple[Problem, JointParams]:
+    """The spring curve of a 2 s locked record of preset ``name`` and the preset without
+    ``hidden`` (its parameters neutral), the base model given."""
+    truth = preset(name)
+    run = Simulator(truth, locked_output=True).run(command, 2.0, seed=1)
+    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
+    given = REGISTRY[hidden].neutral(truth.without(hidden))
+    prob = Problem(rec, given, segment=0.5)
+    prob.set_compare("spring")
+    return prob, given
+
+
 def test_the_trial_start_finds_the_knee_of_a_segmented_spring():
     """wave-drive-50's spring is stiffer above a knee (two segments): on the spring curve of
     a locked record the knee form starts closer than the cubic one, and the trial start
     keeps it (the hold-out case wave-drive-50 / nonlinear_stiffness, locked, seed 62)."""
-    truth = preset("wave-drive-50")
-    run = Simulator(truth, locked_output=True).run("sine:0.458:1", 2.0, seed=1)
-    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
-    given = REGISTRY["nonlinear_stiffness"].neutral(truth.without("nonlinear_stiffness"))
-    prob = Problem(rec, given, segment=0.5)
-    prob.set_compare("spring")
+    prob, given = _spring_curve("wave-drive-50", "nonlinear_stiffness", "sine:0.458:1")
     cubic = _start_form(prob, given, "nonlinear_stiffness", None)
     best = _start(prob, given, "nonlinear_stiffness")
     assert best.compliance.model == "two_segment"
@@ -52,12 +59,7 @@ def test_the_trial_start_scales_the_maxwell_elements(monkeypatch):
     the elements scaled (ELEMENT_GRID) is cheaper than the one at the guess alone."""
     from hdgym.discrepancy import ranking
 
-    truth = preset("tuttle-joint1")
-    run = Simulator(truth, locked_output=True).run("sine:2.98:0.5", 2.0, seed=1)
-    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
-    given = REGISTRY["hysteresis"].neutral(truth.without("hysteresis"))
-    prob = Problem(rec, given, segment=0.5)
-    prob.set_compare("spring")
+    prob, given = _spring_curve("tuttle-joint1", "hysteresis", "sine:2.98:0.5")
     scaled = _start(prob, given, "hysteresis")
     monkeypatch.setattr(ranking, "ELEMENT_GRID", (1.0,))
     guess = _start(prob, given, "hysteresis")

@@ -162,8 +162,9 @@ class Effect:
             parameters (those with lower bound 0) from the record; the trial start
             then searches near them instead of over their whole range.
         forms: further named ways to switch it on, each a switch-on function like the
-            default one (a hardening spring as a cubic or with a knee): the trial start
-            (:func:`.ranking._start`) tries every form and keeps the cheapest.
+            default one (a hardening spring as a cubic or with a knee): the ranking finds a
+            start in every form (:func:`.ranking._form_starts`) and the trial refit fits
+            from each.
     """
 
     name: str
