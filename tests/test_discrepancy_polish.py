@@ -95,3 +95,36 @@ def test_a_candidate_is_judged_against_the_base_model_polished_alike(monkeypatch
     monkeypatch.setattr(W, "fit", lambda problem, q, *a, **k: current if q is p else trial)
     accepted, _, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is not None and accepted[0]["name"] == "stribeck_friction"
+
+
+@pytest.mark.parametrize("compare", ["spring", "time"])
+def test_a_trial_refit_fits_every_form_and_differences_coarse_on_the_curve(monkeypatch,
+                                                                          compare):
+    """The trial refit fits from the cheaper of the ranking's two starts and from the start
+    of each other form of the effect (a knee beside the cubic spring), and keeps the best
+    fit; on the spring curve each fit also differences the coarse step."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+
+    class _Trial(_Problem):
+        stick_slip = False
+
+        def nmse(self, q):
+            return {"mean": 1.0 if q == "fit" else 2.0}  # the start from the fit is cheaper
+
+    calls = []
+
+    def fit(problem, q, fps, **kw):
+        calls.append((q, kw))
+        cost = 0.5 if q == "knee" else 0.8
+        return FitResult(p, {}, {"mean": cost}, 0, cost)
+
+    monkeypatch.setattr(W, "fit", fit)
+    monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
+    cand = {"name": "nonlinear_stiffness", "_start": "fit", "_reset_start": "given",
+            "_forms": ["knee"]}
+    cost, _, res = W._trial(_Trial(compare), current, p, [], cand, 10)
+    assert [q for q, _ in calls] == ["fit", "knee"]
+    assert all(kw["coarse"] is (compare == "spring") for _, kw in calls)
+    assert cost == 0.5 and cand["trial_nmse"] == 0.5
+    assert cand["relative_improvement"] == pytest.approx(0.5)
