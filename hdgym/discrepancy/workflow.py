@@ -186,7 +186,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
         k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
         if _simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
             trials.insert(0, trials.pop(k))
-    accepted = ctrl = None
+    accepted = ctrl = v_now = None  # (the control polish and validation NMSE: once)
     reasons = []
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
@@ -220,7 +220,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
         if vprob is not None:
             # hold-out check: an effect that fits the training record better but does not
             # carry over to the validation record fits noise or the fit's slack
-            v_now = vprob.nmse(current.params)
+            v_now = v_now or vprob.nmse(current.params)
             v_new = vprob.nmse(polished.params)
             ok, ratio = carries_over(v_now, v_new, vprob.names, VALIDATION_GAIN)
             if not ok:
