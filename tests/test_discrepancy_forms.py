@@ -46,7 +46,8 @@ def test_the_trial_start_finds_the_knee_of_a_segmented_spring():
     a locked record the knee form starts closer than the cubic one, and the trial start
     keeps it (the hold-out case wave-drive-50 / nonlinear_stiffness, locked, seed 62)."""
     prob, given = _spring_curve("wave-drive-50", "nonlinear_stiffness", "sine:0.458:1")
-    cubic = _start_form(prob, given, "nonlinear_stiffness", None)
+    cubic, cubic_cost = _start_form(prob, given, "nonlinear_stiffness", None)
+    assert cubic_cost == prob.nmse(cubic)["mean"]
     best = _start(prob, given, "nonlinear_stiffness")
     assert best.compliance.model == "two_segment"
     assert prob.nmse(best)["mean"] < 0.7 * prob.nmse(cubic)["mean"]

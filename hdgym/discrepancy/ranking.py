@@ -197,9 +197,7 @@ def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParam
     cheapest first. (The cheapest start need not fit best: a cubic truth's spring started
     closer as a knee on the tuned case hysteresis+nonlinear_stiffness, and fitted worse.)"""
     starts = [_start_form(problem, p, name, form) for form in REGISTRY[name].form_names()]
-    if len(starts) == 1:
-        return starts
-    return sorted(starts, key=lambda q: problem.nmse(q)["mean"])
+    return [q for q, _ in sorted(starts, key=lambda s: s[1])]
 
 
 SHAPE_GRID = (0.02, 0.1, 0.4)
@@ -214,8 +212,10 @@ sine:2.98:0.5, locked, seed 50, elements 0.02-0.09 x: from the guess alone, 0.5-
 trial stopped at a 51 % validation cut; with the grid it is named, 86 %.)"""
 
 
-def _start_form(problem: Problem, p: JointParams, name: str, form: str | None) -> JointParams:
-    """Switch ``name`` on in ``form`` and pick the cheapest start on a coarse grid of its size.
+def _start_form(problem: Problem, p: JointParams, name: str, form: str | None
+                ) -> tuple[JointParams, float]:
+    """Switch ``name`` on in ``form`` and pick the cheapest start on a coarse grid of its size:
+    ``(start, its mean NMSE)``.
 
     Friction with stick-slip makes the cost narrow-valleyed in the static
     friction level, so a gradient method started far away stalls: every
@@ -299,4 +299,5 @@ def _start_form(problem: Problem, p: JointParams, name: str, form: str | None) -
         if opt.fun < best_cost:
             best_vals = {**{fp.path: math.exp(opt.x) * unit[fp.path] for fp in best_size},
                          **fixed}
-    return set_values(q, best_vals) if best_vals else q
+            best_cost = float(opt.fun)
+    return (set_values(q, best_vals) if best_vals else q), best_cost
