@@ -84,12 +84,15 @@ def test_settle_refits_on_both_records_when_training_does_not_pin_the_parameters
     p0 = _start(truth, 1.04, 0.96)  # in the training valley: its cost there is zero
     cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
     assert val.nmse(p0)["mean"] > 10.0
-    out, why = S.settle(train, val, cur, truth, 20, False, "nothing (more) worth adding")
+    out, why, alone = S.settle(train, val, cur, truth, 20, False, "nothing (more) worth adding")
     assert val.nmse(out.params)["mean"] < 0.01
     assert "training and validation records together" in why
+    # what the training record alone reached, for the outcome's carry-over check
+    assert alone == pytest.approx(cur.nmse["mean"], abs=1e-9)
+    assert S.settle(train, None, cur, truth, 20, False, "")[2] is None
     # a residual no setting of the parameters reaches is left to the outcome
     missing = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]], c=[0.0, 0.0, 3.0])
-    out, why = S.settle(train, missing, cur, truth, 20, False, "")
+    out, why, _ = S.settle(train, missing, cur, truth, 20, False, "")
     assert missing.nmse(out.params)["mean"] >= 100 * 3.0**2
 
 
@@ -103,7 +106,7 @@ def test_settle_leaves_the_validation_record_alone_when_a_candidate_explained_pa
     val = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])
     p0 = _start(truth, 1.04, 0.96)
     cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
-    out, why = S.settle(train, val, cur, truth, 20, False, "", both=False)
+    out, why, _ = S.settle(train, val, cur, truth, 20, False, "", both=False)
     assert val.nmse(out.params)["mean"] == pytest.approx(val.nmse(p0)["mean"], rel=0.05)
     assert "together" not in why
 

@@ -87,7 +87,7 @@ class TwoRecords:
 
 def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
            nfev: int, auto: bool, conclusion: str,
-           choose=None, both: bool = True) -> tuple[FitResult, str]:
+           choose=None, both: bool = True) -> tuple[FitResult, str, float]:
     """The base model refitted before the outcome, when no effect was added.
 
     First on the training record until it converges (:func:`converge`); the horizon is then
@@ -103,7 +103,9 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
     shows there, 1.37 %). It runs only after the search (a base fit that closes in on its
     optimum before the search also mimics the missing effect more closely: on the tuned
     cases the effects were then fitted worse). Returns the settled fit (NMSE on the
-    training record) and the conclusion with what the refits did.
+    training record), the conclusion with what the refits did, and the training record's
+    mean NMSE, percent, of the fit on it alone (what :func:`.outcome.carry_gap` holds the
+    validation record's against; None without a validation record).
     """
     fps = model_params(current.params, problem.scales, given)
     refit = converge(problem, current.params, fps, nfev)
@@ -114,19 +116,20 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
         conclusion += (f"; the base model refitted (coarse and fine difference steps): NMSE "
                        f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
         current = refit
+    alone = None if vprob is None else current.nmse["mean"]
     if vprob is None or not both:
-        return current, conclusion
+        return current, conclusion, alone
     v_now = vprob.nmse(current.params)["mean"]
     if at_noise_level(v_now, vprob.noise["mean"]):
-        return current, conclusion
+        return current, conclusion, alone
     both = converge(TwoRecords(problem, vprob), current.params, fps, nfev, search=True)
     v_both = vprob.nmse(both.params)["mean"]
     if not v_both < v_now:
-        return current, conclusion
+        return current, conclusion, alone
     return rescored(problem, both), (
         conclusion + f"; the base model refitted on the training and validation records "
         f"together (one setting of its own parameters for both): validation NMSE "
-        f"{v_now:.3g} -> {v_both:.3g} %")
+        f"{v_now:.3g} -> {v_both:.3g} %"), alone
 
 
 def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,

@@ -47,7 +47,7 @@ from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
-from .outcome import NOISE_FACTOR, carries_over, judge
+from .outcome import NOISE_FACTOR, carries_over, judge, judged_record, noise_hidden
 from .paths import get_value, set_values
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
@@ -355,7 +355,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     prog.update(1)
     steps: list[Step] = []
     spring_stuck: dict[str, str] = {}
-    conclusion = ""
+    conclusion, alone = "", None  # alone: settle's training NMSE, judged against validation
     candidates: list[dict] = []
     seen: list[dict] = []  # candidates of the escalated horizons
     for _ in range(max_steps):
@@ -437,8 +437,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         # a candidate that passed every check but the escalated cut explains part of the
         # residual: no refit on both records may then call the rest slack
         partly = [c["name"] for c in seen + candidates if "escalated_cut" in c]
-        current, conclusion = settle(problem, vprob, current, params, nfev_base, auto,
-                                     conclusion, _choose_horizon, both=not partly)
+        current, conclusion, alone = settle(problem, vprob, current, params, nfev_base, auto,
+                                            conclusion, _choose_horizon, both=not partly)
         before = current
     prog.close()
     if (before.nmse is not None and problem.segment != chosen
@@ -447,13 +447,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
-    judged = vprob or problem
-    for c in candidates:  # effects the record's noise would hide at the size it suggests
-        if c.get("size_nmse", math.nan) < problem.noise["mean"] and c["name"] not in untestable_why:
-            untestable_why[c["name"]] = (
-                f"at the size this record suggests it changes the compared channels by "
-                f"{c['size_nmse']:.2g} % NMSE, below their measurement noise "
-                f"({problem.noise['mean']:.2g} %)")
+    judged, why_judged = judged_record(problem, vprob)
+    conclusion += why_judged
+    untestable_why = noise_hidden(candidates, problem.noise["mean"], untestable_why)
     untestable = list(untestable_why)
     # the polish after each effect had one fit's budget: the named model, converged
     refit = converge_named(problem, vprob, current, params, nfev_base) if steps else None
@@ -463,7 +459,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         current = refit
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
-        candidates, untestable_why, params, spring_stuck)
+        candidates, untestable_why, params, spring_stuck, alone)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
