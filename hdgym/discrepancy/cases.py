@@ -454,9 +454,9 @@ def main(argv: list[str] | None = None) -> int:
         "",
     ])
     if not args.tuned_only:
-        from . import holdout
+        from .holdout_page import page_section
 
-        text += holdout.page_section(quick=args.quick, jobs=args.jobs)
+        text += page_section(quick=args.quick, jobs=args.jobs)
     failed = [r for r in results if not r.passed]
     if failed:
         text += "\nCases that fail (stated, not hidden):\n\n" + "\n".join(
