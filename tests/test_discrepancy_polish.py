@@ -128,3 +128,45 @@ def test_a_trial_refit_fits_every_form_and_differences_coarse_on_the_curve(monke
     assert all(kw["coarse"] is (compare == "spring") for _, kw in calls)
     assert cost == 0.5 and cand["trial_nmse"] == 0.5
     assert cand["relative_improvement"] == pytest.approx(0.5)
+
+
+def test_a_trial_just_short_of_the_threshold_is_judged_after_its_polish(monkeypatch):
+    """A trial refit has a short budget: one that cuts the cost by at least NEAR x the
+    threshold is polished, and judged on the polished fit (hold-out hduc20 /
+    viscous_friction / sine:3.42:1: the trial cut 37.6 % of 40 %, the effect was then
+    named and cut 98 % of the gap); one below that is not polished, nor one after an effect
+    was named."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+    trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.7}, 0, 0.7)
+    polished = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.3}, 0, 0.3)
+    cand = {"name": "viscous_friction", "score": 0.5, "relative_improvement": 0.3}
+    polishes = []
+
+    def fit(problem, q, *a, **k):
+        if q is p:
+            return current  # (the control polish gains nothing)
+        polishes.append(q)
+        return polished
+
+    _one_candidate(monkeypatch, cand, trial, fit)
+    accepted, _, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is not None and accepted[1] is polished
+    assert polishes == [trial.params]
+    # a polish that gains nothing leaves it short
+    _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
+        current if q is p else trial))
+    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is None and "30.0 %" in why
+    # after an effect is named (near = 1): judged on the trial refit, not polished
+    cand["relative_improvement"] = 0.3
+    polishes.clear()
+    _one_candidate(monkeypatch, cand, trial, fit)
+    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20, near=1.0)
+    assert accepted is None and not polishes
+    # far below the threshold: not polished
+    cand["relative_improvement"] = 0.1
+    polishes.clear()
+    _one_candidate(monkeypatch, cand, trial, fit)
+    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is None and not polishes

@@ -303,7 +303,8 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym.discrepancy.workflow.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
         "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
         "preferred to Stribeck friction when it achieves >= 75 % of its improvement "
-        "(`PARSIMONY`).",
+        "(`hdgym.discrepancy.parsimony.PARSIMONY`); before an effect is named, a trial refit "
+        "that reaches half the relative cost reduction is judged after its polish (`NEAR`).",
         "",
         table(results),
         "",
@@ -427,7 +428,7 @@ def main(argv: list[str] | None = None) -> int:
         "- Stiction and Stribeck friction are nested (stiction is Stribeck friction with a "
         "vanishing Stribeck velocity). Between the two, the simpler one is preferred when it "
         "achieves 75 % of the other's improvement, judged on the validation record when "
-        "there is one (`PARSIMONY`).",
+        "there is one (`parsimony.PARSIMONY`).",
         "- Stiction on `breakaway_ramps` is the hardest tuned case: the stick-slip cost stays "
         "rough (the motor side slips in small steps while the spring winds up, each slip "
         "rings the lightly damped motor-spring mode), so the fitted stiffness and inertias "
