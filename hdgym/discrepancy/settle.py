@@ -87,7 +87,7 @@ class TwoRecords:
 
 def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
            nfev: int, auto: bool, conclusion: str,
-           choose=None, both: bool = True) -> tuple[FitResult, str, float]:
+           choose=None, both: bool = True) -> tuple[FitResult, str, float | None]:
     """The base model refitted before the outcome, when no effect was added.
 
     First on the training record until it converges (:func:`converge`); the horizon is then

@@ -11,7 +11,8 @@
 3. Trial-refit the :data:`TOP_K` best, keep the one that lowers the cost
    most, and add it if the relative improvement is at least
    :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
-   percentage points; polished, also against the base model polished alike), and,
+   percentage points; polished, also against the base model polished alike; before
+   an effect is named a trial within :data:`NEAR` of the threshold is judged polished), and,
    when a validation record is given, if it also lowers the validation NMSE by
    :data:`VALIDATION_GAIN` per channel and its mean. Repeat until no
    candidate passes; then say that nothing (more) is missing rather than
@@ -28,9 +29,11 @@ and again (never longer) after each effect added; when the base model shows noth
 longer horizons on which it drifts and the shortest one are searched too (:func:`_escalate`).
 Only effects the record can show are candidates (each effect's :class:`.effect.Condition`
 list); the rest are listed as untestable with what the record lacks. The outcome is one of
-*named*, *nothing missing* (residual at the noise level) or *unexplained*; for unexplained
+*named*, *nothing missing* (residual at the noise level, and the base model carries over
+to the validation record: :func:`.outcome.carry_gap`) or *unexplained*; for unexplained
 residuals and untestable effects the diagnosis names the protocols (``hdgym experiment ...``)
-whose records would decide (:func:`_outcome`).
+whose records would decide (:func:`.outcome.judge`; a validation record that shows nothing
+above its noise does not judge, :func:`.outcome.judged_record`).
 """
 
 from __future__ import annotations
