@@ -76,7 +76,6 @@ def _harmonic_guess(guess, order: float) -> tuple[float, float]:
     return 0.0, 0.0
 
 
-
 def _ripple_side(s: Scales) -> str:
     return "input" if s.locked else "output"
 

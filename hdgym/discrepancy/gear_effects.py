@@ -64,13 +64,6 @@ def _ke_params(p, s):
             for k in range(len(p.kinematic_error.harmonics)) for c in ("sin", "cos")]
 
 
-def _harmonic_guess(guess, order: float) -> tuple[float, float]:
-    for o, a, b in guess:
-        if o == order:
-            return math.hypot(a, b), math.atan2(b, a)
-    return 0.0, 0.0
-
-
 def _ke_on(p, s):
     lines = s.ke or tuple((o, p.transmission.grounded, 0.0, 0.0) for o in KE_ORDERS)
     out = [{"order": o, "amplitude": math.hypot(a, b), "phase": math.atan2(b, a), "port": port}
