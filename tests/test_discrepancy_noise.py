@@ -126,3 +126,27 @@ def test_channel_selection_on_a_record_of_known_noise():
     names = N.pick_channels(raw, False, p.ratio, DT, CUTOFF, p.sensors.motor_counts,
                             p.sensors.output_counts)
     assert "output_torque" in names and "motor_current" not in names
+
+
+def test_a_motor_that_never_moves_gives_no_motion_channel():
+    """A current below breakaway never turns the motor encoder by a count: the speed channel
+    has no variance and so no NMSE scale (a base model creeping by a count read 10^302 %,
+    hold-out tuttle-joint3 / stribeck_friction / sine:0.157:2, seed 86). It is compared only
+    when no other channel is left."""
+    from hdgym.params import preset
+    from hdgym.sim import Simulator
+
+    p = preset("tuttle-joint3")
+    still = Simulator(p).run("sine:0.157:2", 1.0, seed=1)
+    assert np.ptp(still.motor_angle) == 0.0
+    raw = R.Raw(np.asarray(still.motor_angle), np.asarray(still.output_angle),
+                np.asarray(still.output_torque), np.asarray(still.motor_current))
+    args = (p.ratio, DT, CUTOFF, p.sensors.motor_counts, p.sensors.output_counts)
+    names = N.pick_channels(raw, False, *args)
+    assert names and "motor_speed" not in names
+    bare = R.Raw(np.asarray(still.motor_angle), np.asarray(still.output_angle))
+    assert N.pick_channels(bare, False, *args) == ("motor_speed",)
+    assert N.pick_channels(bare, True, *args) == ("motor_angle",)
+    moving = Simulator(p).run("step:0.30", 1.0, seed=1)
+    raw = R.Raw(np.asarray(moving.motor_angle), np.asarray(moving.output_angle))
+    assert N.pick_channels(raw, False, *args)[0] == "motor_speed"

@@ -188,12 +188,16 @@ def pick_channels(raw: R.Raw, locked: bool, ratio: float, dt: float, cutoff: flo
                   motor_counts: float | None, output_counts: float | None,
                   inverse: bool = False) -> tuple[str, ...]:
     """Which channels a record supports and shows above its noise: the motor angle (locked
-    output) or speed, the transmission error when it spans more than 3 output encoder
+    output) or speed when the motor encoder changes its count at all (else only when no
+    other channel is left), the transmission error when it spans more than 3 output encoder
     counts (standard deviation), the torque and current when they pass :func:`snr_ok`; an
     inverse comparison: the current alone."""
     if inverse:
         return ("motor_current",)
-    names = ["motor_angle" if locked else "motor_speed"]
+    motion = "motor_angle" if locked else "motor_speed"
+    # a motor encoder that never changes its count shows no motion: a channel with no
+    # variance has no NMSE scale (a model creeping one count would read 10^300 %)
+    names = [motion] if np.ptp(raw.motor_angle) > 0 else []
     if not locked and raw.output_angle is not None:
         te = R.lowpass(raw.output_angle - raw.motor_angle / ratio, dt, cutoff)
         q = 2 * math.pi / output_counts if output_counts else 0.0
@@ -202,4 +206,4 @@ def pick_channels(raw: R.Raw, locked: bool, ratio: float, dt: float, cutoff: flo
     for name, x in (("output_torque", raw.output_torque), ("motor_current", raw.motor_current)):
         if x is not None and snr_ok(x, dt, cutoff):
             names.append(name)
-    return tuple(names)
+    return tuple(names) or (motion,)
