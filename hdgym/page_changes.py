@@ -7,7 +7,7 @@ changed since the previous run (after a physics change, say) and by how much.
 Tables are markdown tables. A row is matched by its place (the page's
 headings with their numbers blanked, so a heading such as "Load step (20.9 N
 m)" still matches when 20.9 moves), its first cell and its other cells that
-are not numbers (but not the verdict columns "target" and "met"), and its rank
+are not numbers (but not the verdict columns "target", "met" and "result"), and its rank
 among rows with that same key; a number is the leading number of a cell
 ("1,234 env-steps/s", "58 %: met", "-0.5", "inf").
 """
@@ -23,7 +23,7 @@ __all__ = ["moved_section", "table_numbers"]
 
 _NUMBER = re.compile(r"^\s*([-+]?(?:\d[\d,]*\.?\d*(?:[eE][-+]?\d+)?|inf|nan))(?![\w.])")
 #: verdict columns: they may flip between runs, so they are no part of a row's key
-_VERDICTS = ("target", "met")
+_VERDICTS = ("target", "met", "result")
 _DIGITS = re.compile(r"(?<![\w-])[-+]?\d[\d,.]*(?:[eE][-+]?\d+)?(?!\w)")
 
 

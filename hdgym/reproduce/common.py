@@ -196,3 +196,8 @@ def echo_items(items: Sequence[Item], echo: Callable[[str], None] = print) -> No
         echo(f"({it.key}) {it.title}: {'PASS' if it.passed else 'FAIL'}")
         for c in it.checks:
             echo(f"    {c.line()}")
+
+
+def verdict(ok: bool) -> str:
+    """PASS or FAIL, as the fidelity pages print it."""
+    return "PASS" if ok else "FAIL"
