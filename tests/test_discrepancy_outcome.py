@@ -157,3 +157,20 @@ def test_a_validation_record_that_shows_nothing_does_not_judge():
                      channels=train.names, segment=0.1)
     assert judged_record(train, moving) == (moving, "")
     assert judged_record(train, None) == (train, "")
+
+
+def test_a_blind_validation_record_is_set_aside_before_the_search():
+    """The same still validation record given to a diagnosis: it is set aside before the
+    search (whose carry-over check it could never pass) and the refit on both records, not
+    only when the outcome is judged; the NMSE reported is the training record's."""
+    from hdgym.discrepancy.workflow import diagnose
+    from hdgym.params import preset
+    from hdgym.sim import Simulator
+
+    truth = preset("tuttle-joint3")
+    train = Simulator(truth).run("step:0.262", 1.0, seed=1)
+    still = Simulator(truth).run("step:0.1", 1.0, seed=2)
+    d = diagnose(train, truth, still, quick=True, max_steps=1)
+    assert d.validation is None and d.nmse_after_validation is None
+    assert "judged on the training record" in d.conclusion
+    assert "validation records together" not in d.conclusion

@@ -33,7 +33,8 @@ list); the rest are listed as untestable with what the record lacks. The outcome
 to the validation record: :func:`.outcome.carry_gap`) or *unexplained*; for unexplained
 residuals and untestable effects the diagnosis names the protocols (``hdgym experiment ...``)
 whose records would decide (:func:`.outcome.judge`; a validation record that shows nothing
-above its noise does not judge, :func:`.outcome.judged_record`).
+above its noise does not judge, :func:`.outcome.judged_record`, and is set aside before the
+search).
 """
 
 from __future__ import annotations
@@ -319,6 +320,12 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     vprob = (Problem(validate, params, mode=problem.mode, cutoff=cutoff, channels=problem.names,
                      segment=problem.segment)
              if validate is not None else None)
+    # a validation record that shows nothing above its noise judges nothing: not the
+    # search's carry-over check (which it could never pass), the refit on both records,
+    # nor the outcome; decided once, here
+    judged, why_judged = judged_record(problem, vprob)
+    if judged is problem:
+        vprob = None
     nfev_base, nfev_trial, nfev_polish = (20, 10, 20) if quick else (40, 15, 30)
     why = {n: e.why_not(problem.scales) for n, e in REGISTRY.items()}
     untestable_why = {n: w for n, w in why.items() if w is not None}
@@ -432,7 +439,6 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
-    judged, why_judged = judged_record(problem, vprob)
     conclusion += why_judged
     untestable_why = noise_hidden(candidates, problem.noise["mean"], untestable_why)
     untestable = list(untestable_why)
