@@ -14,7 +14,8 @@ tolerance, the model's number and PASS/FAIL:
 (i) RH-25, §4.1 and fig. 19: stick-slip below 2.5 Hz, none above;
 (j) RH-25, §4.1: which effect damps (hysteresis most, viscous friction least);
 (k) RH-32, §4.2: viscous friction gives little of the damping;
-(l) RH-25, §1 and §2.2: quasistatic hysteresis deviations up to 0.3°;
+(l) RH-25, §1 and §2.2: quasistatic hysteresis deviations up to 0.3°
+    (:mod:`hdgym.reproduce.quasistatic_loop`);
 (e) identifiability of the Maxwell-slip model (seed 002) from records made
     by other models (:mod:`hdgym.identify`).
 
