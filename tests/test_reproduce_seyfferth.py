@@ -75,11 +75,12 @@ def test_rh25_fig18():
     assert np.all(np.diff(peaks) > 0), peaks
 
 
-@pytest.mark.xfail(strict=True, reason="held-out check fails, and the paper's numbers do not "
-                   "allow it: under eq. 7 a turn without a stop needs a deceleration of "
+@pytest.mark.xfail(strict=True, reason="held-out check fails: the model sticks 17 % of the "
+                   "cycle at 3 Hz. Under eq. 7 a turn without a stop needs a deceleration of "
                    "2 B_m0 / J1 = 730 rad/s^2 (Table 1), which a 3 Hz sinusoid reaches only with "
-                   "an amplitude of 2.05 rad at 1 A, above fig. 18's whole 1.8 rad/A axis; the "
-                   "model sticks 16 % of the cycle at 3 Hz and 1 % at 4 Hz")
+                   "an amplitude of 2.05 rad at 1 A, above fig. 18's whole 1.8 rad/A axis: the "
+                   "paper's response must turn far more sharply than a sinusoid, the model's "
+                   "does so at 4 Hz but not at 3 Hz")
 def test_rh25_stick_slip_below_2_5_hz():
     p = preset("seyfferth-rh25")
     _, stuck_lo = S.gain_curve(p, 1.0, np.array([1.0, 2.0]))
@@ -89,9 +90,10 @@ def test_rh25_stick_slip_below_2_5_hz():
 
 
 def test_no_stop_bound_puts_3_hz_beyond_fig_18():
-    """Why item i cannot pass with the paper's own numbers: turning at 3 Hz without a stop
-    needs a sinusoid larger than anything fig. 18 shows at 1 A; a faster drive or a weaker
-    startup torque needs less."""
+    """Why item i is hard with the paper's own numbers: turning at 3 Hz without a stop
+    needs a sinusoid larger than anything fig. 18 shows at 1 A (so only a response with
+    sharper turns than a sinusoid's can); a faster drive or a weaker startup torque needs
+    less."""
     p = preset("seyfferth-rh25")
     decel, amp = S.no_stop_bound(p, 3.0)
     assert decel == pytest.approx(2 * 0.085 / 2.33e-4)
