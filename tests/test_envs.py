@@ -465,3 +465,22 @@ def test_resonance_vector_env_reports_the_task_per_env():
         _, _, _, _, si = single.step(np.array([1.0], dtype=np.float32))
     for key in ("time_to_target", "peak_torque", "success"):
         assert info[key][1] == si[key]
+
+
+def test_bench_vector_runner_steps_a_chunk_and_cycles():
+    """The short timed rounds of the 1,024-env bench walk through the actions in order and
+    wrap around, each round reporting the env steps it ran."""
+    from hdgym.envs.bench import _vector_runner
+
+    seen = []
+
+    class Env:
+        def step(self, a):
+            seen.append(int(a[0, 0]))
+
+    actions = np.arange(5).reshape(5, 1, 1) * np.ones((1, 4, 1))
+    run = _vector_runner(Env(), actions, chunk=3)
+    assert run() == 12 and run() == 12
+    assert seen == [0, 1, 2, 3, 4, 0]
+    whole = _vector_runner(Env(), actions)
+    assert whole() == 20 and seen[6:] == [0, 1, 2, 3, 4]
