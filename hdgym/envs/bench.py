@@ -55,25 +55,20 @@ def _single_runner(env: gym.Env, actions: np.ndarray) -> Callable[[], int]:
 
 
 def _vector_runner(env: Any, actions: np.ndarray, chunk: int | None = None) -> Callable[[], int]:
-    """A call steps through ``actions`` (all of them, or the next ``chunk``, cycling)."""
+    """A call steps through the next ``chunk`` of ``actions`` (default all), cycling."""
     step = env.step
-    if chunk is None:
-        def run() -> int:
-            for a in actions:
-                step(a)
-            return actions.shape[0] * actions.shape[1]
-
-        return run
+    n = actions.shape[0]
+    size = n if chunk is None else chunk
     pos = [0]
 
-    def run_chunk() -> int:
+    def run() -> int:
         k = pos[0]
-        for j in range(chunk):
-            step(actions[(k + j) % actions.shape[0]])
-        pos[0] = (k + chunk) % actions.shape[0]
-        return chunk * actions.shape[1]
+        for j in range(size):
+            step(actions[(k + j) % n])
+        pos[0] = (k + size) % n
+        return size * actions.shape[1]
 
-    return run_chunk
+    return run
 
 
 def compare_rates(name: str, ref_name: str, target: float, mine: Callable[[], int],

@@ -146,17 +146,18 @@ def first_stuck_turn(p: JointParams, sim: Any, f: float,
     return abs(float(net)), float(b_m0), abs(float(w[k - 1])) / sim.ctrl_dt
 
 
-def no_stop_bound(p: JointParams, f: float) -> tuple[float, float]:
+def no_stop_bound(p: JointParams, f: float, b_m0: float | None = None) -> tuple[float, float]:
     """What a locked-output sine needs to turn at ``f`` Hz without a stop (eq. 7).
 
     Just before a turn the shaft decelerates under ``tau_m - T_k/N - B_m0``; it turns
     without sticking only if ``|tau_m - T_k/N| > B_m0`` there, so the deceleration must
-    reach ``2 B_m0 / J1`` (``B_m0`` with no load history, the smallest it gets). A
-    sinusoidal response of amplitude ``A`` decelerates at ``A (2 pi f)^2`` at its turns.
+    reach ``2 B_m0 / J1`` (``b_m0``, N m; default the startup torque with no load history,
+    the smallest it gets). A sinusoidal response of amplitude ``A`` decelerates at
+    ``A (2 pi f)^2`` at its turns.
 
     Returns:
         ``(deceleration, amplitude)``: ``2 B_m0 / J1`` (rad/s²) and the sinusoid's
         amplitude (rad) that reaches it at ``f``.
     """
-    decel = 2.0 * p.friction.input.coulomb / p.motor.inertia
+    decel = 2.0 * (p.friction.input.coulomb if b_m0 is None else b_m0) / p.motor.inertia
     return decel, decel / (2.0 * math.pi * f) ** 2

@@ -289,15 +289,16 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     turn = first_stuck_turn(p, sim, 3.0)
     if turn is not None:
         net, b_m0, decel = turn
+        need_decel = no_stop_bound(p, 3.0, b_m0)[0]
         item.measured.append(
             f"for information, at 3 Hz the shaft reaches a turn with |τ_m - T_k/N| = {net:.3f} "
             f"N m against the startup torque B_m0(L) = {b_m0:.3f} N m (eq. H4), so it sticks "
             f"until the current has fallen far enough; turning without a stop needs "
             f"|τ_m - T_k/N| > B_m0 at the turn, i.e. a deceleration of at least "
-            f"2 B_m0 / J1 = {2 * b_m0 / p.motor.inertia:.0f} rad/s² just before it "
+            f"2 B_m0 / J1 = {need_decel:.0f} rad/s² just before it "
             f"(the model's, over the control period before the stop: {decel:.0f} rad/s²)")
-    decel, amp = no_stop_bound(p, 3.0)
-    need = {f: no_stop_bound(p, f)[1] for f in (3.0, 4.0)}
+    bound = {f: no_stop_bound(p, f) for f in (3.0, 4.0)}
+    decel, amp = bound[3.0]
     item.measured.append(
         f"for information, the paper's own numbers: with Table 1's B_m0 = "
         f"{p.friction.input.coulomb:g} N m (no load history) and J1, a turn without a stop needs "
@@ -305,8 +306,8 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
         f"with an amplitude of {amp:.2f} rad at 1 A, above fig. 18's whole axis "
         f"({FIG18_MAX_GAIN} rad/A), so a response without stops at 3 Hz must turn more sharply "
         f"than a sinusoid. The model's does at 4 Hz (no stop at {g_hi[1]:.2f} rad, where a "
-        f"sinusoid needs {need[4.0]:.2f} rad) but not at 3 Hz ({g_hi[0]:.2f} rad; a sinusoid "
-        f"needs {need[3.0]:.2f})")
+        f"sinusoid needs {bound[4.0][1]:.2f} rad) but not at 3 Hz ({g_hi[0]:.2f} rad; a sinusoid "
+        f"needs {amp:.2f})")
     plt = plt_module()
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for f, style in ((1.0, "-"), (4.0, "--")):
