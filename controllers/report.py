@@ -96,7 +96,7 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
         "range, and it never recovers.",
         "- A controller that sees only the motor learns of a load step when the motor starts "
         "to move: at best it holds the motor still, and the output then swings on the "
-        "flexspline (wind-up plus its overshoot; `controllers.experiments.motor_held_swing`, "
+        "flexspline (wind-up plus its overshoot; `controllers.experiments.motor_held`, "
         "simulated with the motor's inertia raised a millionfold). Where half the PID's peak "
         f"is below that swing, the {DOB_TARGET:.0f} % target cannot be met by any motor-side "
         f"loop, and the DOB is judged against the swing instead (within "
@@ -190,8 +190,10 @@ def markdown(results: dict[str, Any], quick: bool, elapsed: float, out: Any = No
             f"values, Q-filter (τs+1)⁻² at {ls['dob_bandwidth']:.3g} Hz, Tustin "
             f"(`control.sample_system`), around the PID without its integral term (PD). "
             f"Recovery: time until the output deviation stays "
-            f"within ±{ls['band'] * as_:.1f} arcsec (10 % of the PID peak) of its final "
-            "value (the mean of the last 0.2 s, mostly wind-up and friction hold). "
+            f"within ±{ls['band'] * as_:.1f} arcsec (10 % of the PID peak) of "
+            f"{ls['windup'] * as_:.1f} arcsec, where the load leaves the output with the motor "
+            "held at its setpoint (the flexspline's wind-up; inf: a loop whose motor friction "
+            "holds off further, not within the run). "
             f"With the motor held still the output swings to {ls['held'] * as_:.1f} arcsec "
             "(the lower bound for any motor-side loop).",
             "",

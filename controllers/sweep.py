@@ -32,6 +32,7 @@ from controllers.experiments import (
     load_step_metrics,
     load_step_peak,
     load_step_run,
+    motor_held,
     point_to_point_metrics,
     point_to_point_run,
     settings,
@@ -152,9 +153,9 @@ def sweep_load_step(params: JointParams, controller: Mapping[str, Any], seed: in
                     ) -> dict[str, float]:
     """Load-torque step while holding position (benchmark 2): ``peak_deviation_arcsec``,
     ``recovery_s`` (until the deviation stays within 10 % of the PID's peak on the same drive
-    of its final value; inf: not within the run), ``reduction_pct`` of the peak against the
-    PID alone on the same drive and seed, ``peak_current_A``, ``chatter_A`` (RMS change of the
-    current command per sample).
+    of the drive's wind-up with the motor held at its setpoint; inf: not within the run),
+    ``reduction_pct`` of the peak against the PID alone on the same drive and seed,
+    ``peak_current_A``, ``chatter_A`` (RMS change of the current command per sample).
 
     The step (40 % of the nominal peak motor torque x ratio) and the
     controller come from the nominal drive; kinds ``pid``, ``pid+dob`` (other
@@ -168,7 +169,8 @@ def sweep_load_step(params: JointParams, controller: Mapping[str, Any], seed: in
     t, load, _ = load_profile(nominal, cfg)
     run = load_step_run(params, ctl, cfg, load, seed)
     base = _pid_load_peak(params, nominal, quick, seed)
-    m = load_step_metrics(run, t, nominal.integration.ctrl_dt, cfg, 0.1 * base)
+    _, windup = motor_held(params, cfg, load)
+    m = load_step_metrics(run, t, nominal.integration.ctrl_dt, cfg, 0.1 * base, windup)
     return {"peak_deviation_arcsec": m["peak"] * _ARCSEC, "recovery_s": m["recovery"],
             "reduction_pct": 100 * (1 - m["peak"] / base),
             "peak_current_A": m["peak_current"], "chatter_A": m["chatter"]}

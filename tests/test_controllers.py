@@ -223,7 +223,9 @@ def test_ke_feedforward_from_identified_model(tracking, name: str) -> None:
     w_out = tr["output_speed"]
     mesh = tr["mesh_friction"]
     assert p.friction.placement == "mesh"
-    assert fo.coulomb + fo.viscous * w_out <= mesh.level <= 1.3 * (fo.coulomb + fo.viscous * w_out)
+    # (an identification from a record: a per cent below the base level is its error)
+    base = fo.coulomb + fo.viscous * w_out
+    assert 0.97 * base <= mesh.level <= 1.3 * base, (mesh.level, base)
     ripple = math.hypot(mesh.cos[0], mesh.sin[0])
     assert ripple == pytest.approx(fo.ripple[0].amplitude, rel=0.3)
     assert tr["reduction"]["PID + KE feedforward"] >= experiments.KE_TARGET

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from hdgym.params import (
+    Friction,
     Hysteresis,
     Motor,
     Transmission,
@@ -198,6 +199,17 @@ def test_tuttle_friction_and_current_limits(presets):
         assert out.cubic < 0
         assert any(r.frame == "output" and r.order == 1.0 and r.amplitude < out.coulomb
                    for r in out.ripple)
+
+
+def test_tooth_coefficient_takes_the_flank_sliding():
+    """mu' = mu / (sin alpha cos alpha): normal force T / cos alpha, flank sliding 1 / sin alpha
+    times the output spline's speed (Tuttle eq. 3.81); 2.31 mu at 30 degrees. A zero pressure
+    angle has no sliding geometry and is refused by name."""
+    f = Friction(tooth_mu=0.15, tooth_angle=math.radians(30.0))
+    assert f.load_coefficient == pytest.approx(0.15 / (0.5 * math.sqrt(3.0) / 2.0))
+    assert f.load_coefficient == pytest.approx(2.0 * 0.15 / math.cos(math.radians(30.0)))
+    with pytest.raises(ValueError, match="friction.tooth_angle"):
+        Friction(tooth_mu=0.15, tooth_angle=0.0)
 
 
 def test_maxwell_and_tanh_presets(presets):

@@ -32,7 +32,7 @@ JOINT = preset("tuttle-joint1")
 ])
 def test_fused_vector_step_equals_single_envs(env_id, parallel, sensors):
     n, seed, steps = 70, 4, NOISE_BLOCK + 40  # two blocks, one noise refill
-    kw = {"preset": JOINT, "sensors": sensors, "torque_limit": 4.0, "speed_limit": 150.0,
+    kw = {"preset": JOINT, "sensors": sensors, "torque_limit": 8.0, "speed_limit": 150.0,
           "max_episode_steps": 45, "randomize": {"compliance.stiffness": 0.2}}
     venv = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point",
                         parallel=parallel, **kw)

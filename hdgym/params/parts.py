@@ -304,20 +304,23 @@ class Friction:
                 object.__setattr__(self, side, FrictionSide(**v))
         finite(self, "friction")
         require(self.tooth_mu >= 0, "friction.tooth_mu", ">= 0", self.tooth_mu)
-        require(0 <= self.tooth_angle < math.pi / 2, "friction.tooth_angle", "in [0, pi/2) rad",
+        require(0 < self.tooth_angle < math.pi / 2, "friction.tooth_angle", "in (0, pi/2) rad",
                 self.tooth_angle)
         require(self.placement in FRICTION_PLACEMENTS, "friction.placement",
                 f"one of {FRICTION_PLACEMENTS}", self.placement)
 
     @property
     def load_coefficient(self) -> float:
-        """mu' = mu / cos(alpha): tooth friction torque per N m transmitted.
+        """mu' = mu / (sin(alpha) cos(alpha)): output-referred tooth friction torque per
+        N m transmitted (docs/physics.md eq. 7).
 
         The normal force on a tooth flank at pressure angle alpha carries the
-        tangential load T/r as T/(r cos alpha); friction mu F_N acts on the
-        same pitch radius.
+        tangential load T/r as T/(r cos alpha); the flank slides 1/sin(alpha)
+        times as fast as the circular spline turns at the pitch radius (Tuttle
+        1992 eq. 3.81: tooth-surface speed = B x WG speed, B = 1/((N+1) sin alpha)),
+        so friction mu F_N does the work of mu T/(sin alpha cos alpha) at the output.
         """
-        return self.tooth_mu / math.cos(self.tooth_angle)
+        return self.tooth_mu / (math.sin(self.tooth_angle) * math.cos(self.tooth_angle))
 
 
 @dataclass(frozen=True)

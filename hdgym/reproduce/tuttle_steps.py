@@ -274,10 +274,10 @@ def check_joint1_torque(out: Path, quick: bool) -> Item:
                 "largest |torque| over the plateau currents in 60-110 N m; for information, "
                 "the same with the transmission friction placed between output and ground "
                 "(friction.placement = output)",
-                role="held-out check: no number was tuned on it (the friction sits in the mesh "
-                     "where Tuttle's text puts it, §3 p. 113, but on the grounded side of the "
-                     "compliance, where his models 4 and 5 have it on the output side: "
-                     "docs/physics.md eq. 8)")
+                role="held-out check: no number was tuned on it (K_t and damping were "
+                     "calibrated on T2 alone, after the tooth coefficient took the flank's "
+                     "sliding, mu' = mu/(sin alpha cos alpha) from Tuttle eq. 3.81: "
+                     "docs/physics.md eq. 7)")
     p = preset("tuttle-joint1")
     cur = np.array(STEP_CURRENTS)
     runs, pl = _joint1_plateau(p)
