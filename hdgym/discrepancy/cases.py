@@ -72,7 +72,7 @@ def case_joint() -> JointParams:
             output=FrictionSide(coulomb=1.2, breakaway=2.4, stribeck_velocity=0.2, viscous=0.5,
                                 ripple=(Ripple(order=1, amplitude=0.2, phase=0.4),
                                         Ripple(order=2, amplitude=0.3, phase=1.1))),
-            tooth_mu=0.12),
+            tooth_mu=0.06),  # mu' = 0.139 (docs/physics.md eq. 7; 0.12 under mu / cos)
         kinematic_error=KinematicError(harmonics=(
             Harmonic(order=2, amplitude=3e-4, phase=0.3),
             Harmonic(order=4, amplitude=1e-4, phase=1.0))),
