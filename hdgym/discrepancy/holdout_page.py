@@ -21,9 +21,10 @@ from .pool import ordered_map
 def page_section(quick: bool = False, jobs: int = 1) -> str:
     """The blind and hold-out sections of results/discrepancy.md (runs every case).
 
-    Every case runs the workflow's quick fit settings (fewer least-squares iterations:
-    53 full-preset diagnoses in one page run); ``quick`` runs the blind cases only; ``jobs``
-    worker processes (:func:`.pool.ordered_map`).
+    Every case runs the workflow's full fit settings, what ``hdgym diagnose`` runs (a
+    case's verdict can depend on the fit's budget, so the page judges the settings users
+    get); ``quick`` runs the blind cases only, with the quick fit settings; ``jobs`` worker
+    processes (:func:`.pool.ordered_map`).
     """
     from .outcome import CARRY_FACTOR, FLOOR_FACTOR, NOISE_FACTOR, RESOLVED
 
@@ -73,9 +74,10 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "again after each effect added, and other horizons (longer ones on which the model "
              "drifts, the shortest) are searched when nothing is found at it "
              "(`hdgym.discrepancy.problem.Problem.choose_horizon`, "
-             "`hdgym.discrepancy.workflow._escalate`). These cases run the workflow's quick fit "
-             "settings (fewer least-squares iterations), so the full-preset diagnoses fit in one "
-             "run of the page's command. Hold-out sets: seeds "
+             "`hdgym.discrepancy.workflow._escalate`). These cases run the workflow's full fit "
+             "settings, what `hdgym diagnose` runs (earlier pages ran the quick ones, fewer "
+             "least-squares iterations; a single case's verdict can move with the fit's budget). "
+             "Hold-out sets: seeds "
              f"{', '.join(map(str, DEVELOPMENT_SEEDS))} were each the fresh set of an earlier "
              "page and then had their failing cases run one by one to find their causes while "
              "the workflow was changed (so they are no longer untouched: development sets; "
@@ -92,7 +94,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
         sets.append((f"Fresh hold-out (seed {FRESH_SEED})", holdout_cases(FRESH_SEED)))
     for title, cases in sets:
         results = []
-        for c, r in zip(cases, ordered_map(partial(run, quick=True), cases, jobs), strict=True):
+        for c, r in zip(cases, ordered_map(partial(run, quick=quick), cases, jobs), strict=True):
             print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
                   f", hit {r.hit} ({r.seconds:.1f} s)", flush=True)
             results.append(r)
