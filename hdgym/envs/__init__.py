@@ -7,7 +7,7 @@
 * ``HarmonicDriveResonance-v0``: run-up through the resonance trap by a
   deadline within the gear rating
   (:class:`~hdgym.envs.resonance.HarmonicDriveResonanceEnv`), with the
-  variants ``HarmonicDriveResonanceLong-v0`` (6 s episodes, 4 s deadline) and
+  variants ``HarmonicDriveResonanceLong-v0`` (6 s episodes, 3.5 s deadline) and
   ``HarmonicDriveResonanceNoTorqueSensor-v0`` (no torque sensor);
 
 each with a native vector env (:mod:`hdgym.envs.vector`) for
@@ -41,7 +41,7 @@ LONG_EPISODE_STEPS = 6000
 #: trained on the default variant sees on it what it saw in training.
 RESONANCE_VARIANTS: dict[str, dict[str, Any]] = {
     "HarmonicDriveResonance-v0": {},
-    "HarmonicDriveResonanceLong-v0": {"deadline": 4.0},
+    "HarmonicDriveResonanceLong-v0": {"deadline": 3.5},
     "HarmonicDriveResonanceNoTorqueSensor-v0": {"sensors": {"torque_sensor": False}},
 }
 #: registered variants -> control periods per episode

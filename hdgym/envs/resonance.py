@@ -28,11 +28,11 @@ TRAP_ONLY_CURRENT_LIMIT = 3.7
 #: rating is the smallest torque cap at which the best tuned classical family succeeds in
 #: >= 50 % of the training episodes at the deadline (not above the rated maximum): the
 #: benchmark sits where classical control is half-way, neither trivial nor beyond reach.
-GEAR_RATINGS = {"tuttle-joint1": 190.0}
+GEAR_RATINGS = {"tuttle-joint1": 140.0}
 #: s, the default deadline: the shortest deadline of the front at which every classical
 #: family reaches the target in >= 90 % of the training episodes when the torque is not capped
-DEADLINE = 2.5
-#: s, the episode (3,000 control periods of 1 ms): half a second of holding after the deadline
+DEADLINE = 2.0
+#: s, the episode (3,000 control periods of 1 ms): a second of holding after the deadline
 HORIZON = 3.0
 #: s, the long-deadline variant's episode (6,000 control periods of 1 ms): long enough that
 #: the front of the tuned classical families, measured on it, shows where more time stops
@@ -44,7 +44,7 @@ LONG_EPISODE = 6.0
 #: episodes) from which the best classical family's training success at the rating gains
 #: no more than one training episode up to the front's longest deadline: past it, more
 #: time no longer helps tuned classical control
-LONG_DEADLINE = 4.0
+LONG_DEADLINE = 3.5
 
 
 def gear_rating(preset: str | JointParams | None) -> float | None:
