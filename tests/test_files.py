@@ -84,7 +84,8 @@ def test_compile_notice_once_per_block(capsys):
 
 
 LONG_JOBS = ["hdgym/reproduce/common.py", "hdgym/numerics.py", "hdgym/bench.py",
-             "hdgym/discrepancy/workflow.py", "controllers/benchmark.py", "hdgym/sweep/runner.py"]
+             "hdgym/discrepancy/workflow.py", "controllers/benchmark.py", "hdgym/sweep/runner.py",
+             "hdgym/reproduce/calibration.py"]
 
 
 @pytest.mark.parametrize("path", LONG_JOBS)
