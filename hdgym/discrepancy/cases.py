@@ -358,7 +358,9 @@ def main(argv: list[str] | None = None) -> int:
         "*Outcome* is *named* (final NMSE within 2 x what the final model shows on a record "
         "it made itself, its own floor, `hdgym.discrepancy.floor.floor_nmse`), *named; rest "
         "unexplained* (above that), *nothing missing* (nothing named; final NMSE within 3 x "
-        "the measurement-noise NMSE, `hdgym.discrepancy.noise`, or at most 0.5 %) or "
+        "the measurement-noise NMSE, `hdgym.discrepancy.noise`, or at most 0.5 %, and every "
+        "channel within 3 x its own noise NMSE or at most 0.5 %, "
+        "`hdgym.discrepancy.outcome.noisy_channel_hides`) or "
         "*unexplained*; no channel alone may be above 3 x its floor and beyond what "
         "the fitted parameters can change it (`hdgym.discrepancy.floor`).",
         "- On a locked output whose time channels show nothing, the spring curve is searched "
