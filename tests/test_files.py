@@ -90,9 +90,9 @@ LONG_JOBS = ["hdgym/reproduce/common.py", "hdgym/numerics.py", "hdgym/bench.py",
 
 @pytest.mark.parametrize("path", LONG_JOBS)
 def test_long_jobs_show_progress(path):
-    """controllers, diagnose, reproduce, bench, numerics and sweep loop under a bar: each
-    calls hdgym.progress's ``bar`` (imported is not enough). Behaviour: the reproduce bar
-    below, the sweep's in tests/test_sweep.py."""
+    """controllers, diagnose, reproduce, bench, numerics, sweep and the calibration scan loop
+    under a bar: each calls hdgym.progress's ``bar`` (imported is not enough). Behaviour: the
+    reproduce bar below, the sweep's in tests/test_sweep.py."""
     import ast
     from pathlib import Path
 

@@ -121,7 +121,7 @@ def noisy_channel_hides(final: dict[str, float], noise: dict[str, float]) -> dic
     for k, v in final.items():
         if k == "mean" or k not in noise or not math.isfinite(v):
             continue
-        if v > max(NOISE_FACTOR * noise[k], RESOLVED):
+        if not at_noise_level(v, noise[k]):
             out[k] = (f"NMSE {v:.3g} % against its own measurement noise {noise[k]:.2g} % (the "
                       f"mean is within {NOISE_FACTOR:g} x the mean noise, this channel is not)")
     return out

@@ -26,6 +26,7 @@ import numpy as np
 from hdgym.params import JointParams, preset
 from hdgym.progress import bar
 from hdgym.reproduce import tuttle_steps
+from hdgym.reproduce.common import verdict
 
 PRESET = "tuttle-joint1"
 KT = tuple(round(0.056 + 0.001 * i, 3) for i in range(15))  # N m/A
@@ -116,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     both = [pt for pt in passing if t3_passes(pt)]
     print(f"chosen: K_t {best.kt:g} N m/A, damping {best.damping:g} N m s/rad (T2 spread "
           f"{100 * best.spread:.1f} %); held-out T3 there: peak {best.t3_peak:.0f} N m, "
-          f"mean {best.t3_mean:.1f} N m: {'PASS' if t3_passes(best) else 'FAIL'}")
+          f"mean {best.t3_mean:.1f} N m: {verdict(t3_passes(best))}")
     peaks = [pt.t3_peak for pt in passing]
     print(f"T3 at the {len(passing)} T2-passing points: {len(both)} pass; peaks "
           f"{min(peaks):.0f}-{max(peaks):.0f} N m")

@@ -18,6 +18,11 @@ from hdgym.page_changes import moved_section
 from hdgym.params import JointParams, atomic_write_text
 
 
+def verdict(ok: bool) -> str:
+    """PASS or FAIL, as the fidelity pages print it."""
+    return "PASS" if ok else "FAIL"
+
+
 @dataclass(frozen=True)
 class Check:
     """One observable, the paper beside the model.
@@ -41,7 +46,7 @@ class Check:
     def line(self) -> str:
         """One line for the terminal."""
         return (f"{self.observable}: paper {self.paper} ({self.passage}); tolerance "
-                f"{self.tolerance}; model {self.model}: {'PASS' if self.passed else 'FAIL'}")
+                f"{self.tolerance}; model {self.model}: {verdict(self.passed)}")
 
 
 @dataclass
@@ -168,15 +173,15 @@ def write_page(out: Path, command: str, results: Sequence[tuple[Paper, list[Item
     for it in everything:
         if not it.checks:
             lines.append(f"| ({it.key}) {it.title} | see below | | | | | "
-                         f"{'PASS' if it.passed else 'FAIL'} |")
+                         f"{verdict(it.passed)} |")
         for c in it.checks:
             lines.append(f"| ({it.key}) | {c.observable} | {c.passage} | {c.paper} | "
-                         f"{c.tolerance} | {c.model} | {'PASS' if c.passed else 'FAIL'} |")
+                         f"{c.tolerance} | {c.model} | {verdict(c.passed)} |")
     lines.append("")
     for paper, items in results:
         lines += [f"## {paper.title}", ""]
         for it in items:
-            lines += [f"### ({it.key}) {it.title}: {'PASS' if it.passed else 'FAIL'}", ""]
+            lines += [f"### ({it.key}) {it.title}: {verdict(it.passed)}", ""]
             if it.role:
                 lines += [f"Calibration: {it.role}", ""]
             lines += [f"Criterion: {it.criterion}.", "", "Measured:", ""]
@@ -193,11 +198,6 @@ def write_page(out: Path, command: str, results: Sequence[tuple[Paper, list[Item
 def echo_items(items: Sequence[Item], echo: Callable[[str], None] = print) -> None:
     """Print each item's verdict and its side-by-side checks."""
     for it in items:
-        echo(f"({it.key}) {it.title}: {'PASS' if it.passed else 'FAIL'}")
+        echo(f"({it.key}) {it.title}: {verdict(it.passed)}")
         for c in it.checks:
             echo(f"    {c.line()}")
-
-
-def verdict(ok: bool) -> str:
-    """PASS or FAIL, as the fidelity pages print it."""
-    return "PASS" if ok else "FAIL"

@@ -28,7 +28,7 @@ import numpy as np
 
 from hdgym.identify import MaxwellSlipFit, cycle_energy, fit_maxwell_slip, nmse, virgin_curve_error
 from hdgym.params import JointParams, preset
-from hdgym.reproduce.common import Item, finish, plt_module, simulator, within
+from hdgym.reproduce.common import Item, finish, plt_module, simulator, verdict, within
 
 #: seed 002's NMSE on measured loops, percent: training (WAVE-Drive) and validation (pancake)
 SEED002_TRAINING_NMSE = 0.94
@@ -103,7 +103,7 @@ def _maxwell_part(item: Item, quick: bool, ax) -> bool:
             ok &= good
             item.measured.append(f"A, full: validation NMSE <= {SEED002_VALIDATION_NMSE} %, "
                                  "virgin curve within 3 % over the excited torsion, slipped "
-                                 f"strength within 10 % {'PASS' if good else 'FAIL'}")
+                                 f"strength within 10 % {verdict(good)}")
         else:
             item.measured.append(f"A, small: beyond the excited torsion the curve is "
                                  f"{'' if beyond > inside else 'not '}worse than inside "
@@ -138,7 +138,7 @@ def _tanh_part(item: Item, quick: bool, ax) -> bool:
         f"B, tanh truth with load-history width (seyfferth-rh25, random current RMS {amp} A, "
         f"1 Hz, {duration:.0f} s, torque up to {np.max(np.abs(tr.output_torque)):.0f} N m): "
         f"NMSE training {fit.nmse:.3f} % (<= seed 002's {SEED002_TRAINING_NMSE} %) "
-        f"{'PASS' if good else 'FAIL'}; validation {e_val:.3f} % (seed 002: "
+        f"{verdict(good)}; validation {e_val:.3f} % (seed 002: "
         f"{SEED002_VALIDATION_NMSE} %; for information: a record with another load history "
         "has other loop widths, which a Masing model cannot follow)")
     sim = simulator(p, locked_output=True)

@@ -29,7 +29,15 @@ from hdgym.reproduce.analysis import (
     starting_current,
     step_table,
 )
-from hdgym.reproduce.common import Item, Paper, finish, plt_module, simulator, within
+from hdgym.reproduce.common import (
+    Item,
+    Paper,
+    finish,
+    plt_module,
+    simulator,
+    verdict,
+    within,
+)
 from hdgym.reproduce.tuttle_steps import (
     check_joint1_steps,
     check_joint1_torque,
@@ -89,10 +97,10 @@ def check_ke(out: Path, quick: bool) -> Item:
             f"grid that turns the WG steadily at 3-60 rad/s), mean WG speed "
             f"{math.degrees(speeds[0]):.0f} °/s, {spec.wg_angle.size // 256} WG revolutions; "
             f"p-p {pp:.4f}° (target {target}°, {100 * (pp / target - 1):+.1f} %) "
-            f"{'PASS' if pp_ok else 'FAIL'}; lines 1x {math.degrees(a1):.5f}°, "
+            f"{verdict(pp_ok)}; lines 1x {math.degrees(a1):.5f}°, "
             f"2x {math.degrees(a2):.5f}°, 4x {math.degrees(a4):.5f}°; 2x dominant "
-            f"{'PASS' if dominant else 'FAIL'}"
-            + (f"; 1x/2x = {a1 / a2:.3f} {'PASS' if no1 else 'FAIL'}" if name == "tuttle-joint1"
+            f"{verdict(dominant)}"
+            + (f"; 1x/2x = {a1 / a2:.3f} {verdict(no1)}" if name == "tuttle-joint1"
                else ""))
         ax = axes[row, 0]
         ax.plot(np.degrees(spec.wg_angle - spec.wg_angle[0]) / 360.0, np.degrees(spec.signal),
@@ -142,7 +150,7 @@ def check_resonance(out: Path, quick: bool) -> Item:
                    "resonance speed / 360", f"{fn:.0f} Hz", "±10 %", f"{fpk:.1f} Hz", good)
         item.measured.append(f"{name}: peak {fpk:.1f} Hz (target {fn:.0f} Hz, "
                              f"{100 * (fpk / fn - 1):+.1f} %), current RMS {amp:.3g} A "
-                             f"{'PASS' if good else 'FAIL'}")
+                             f"{verdict(good)}")
         sel = (f > 2) & (f < 250)
         ax.semilogy(f[sel], np.abs(h[sel]), label=f"{name}: peak {fpk:.1f} Hz (≈{fn:.0f})")
     ax.set_xlabel("frequency (Hz)")
@@ -181,9 +189,9 @@ def check_loop(out: Path, quick: bool) -> Item:
                          f"{math.degrees(np.max(np.abs(windup[last]))):.3f}°")
     item.measured.append(f"incremental stiffness {lm.k_low:.4g} N m/rad (|T| < 25 %) -> "
                          f"{lm.k_high:.4g} N m/rad (|T| > 70 %): hardening x{lm.hardening:.2f} "
-                         f"{'PASS' if hard_ok else 'FAIL'}")
+                         f"{verdict(hard_ok)}")
     item.measured.append(f"loop area {lm.area:.4g} J, loading - unloading torque at equal wind-up "
-                         f"{lm.branch_gap:.3g} N m {'PASS' if hyst_ok else 'FAIL'}")
+                         f"{lm.branch_gap:.3g} N m {verdict(hyst_ok)}")
     item.check("joint 2: hardening spring", "as the torque-fluctuation amplitude increases, "
                "the effective stiffness of the transmission increases (§2.6 p. 87; stiffness "
                "curves §2.3)", "stiffer at high load", "x1.5 or more", f"x{lm.hardening:.2f}",
