@@ -341,6 +341,28 @@ def test_effects_say_where_they_can_be_seen():
         assert e.seen and e.protocol in experiments.PROTOCOLS and e.channels
 
 
+def test_a_run_up_from_rest_shows_a_band_of_speeds():
+    """A current step runs the joint up to a top speed that fills most of the record: the
+    moving speed's 90th over 10th percentile stays near 1, but the run-up passes through
+    the lower speeds long enough to show viscous friction apart from Coulomb friction."""
+    import dataclasses
+
+    from hdgym.discrepancy.effect import BAND_SPREAD, BAND_TIME
+    from hdgym.discrepancy.problem import Problem
+    from hdgym.params import preset
+    from hdgym.sim import Simulator
+
+    truth = preset("seyfferth-rh25")
+    rec = Simulator(truth).run("step:1.8", 6.0, seed=1)
+    s = Problem(rec, truth).scales
+    assert s.speed_spread < BAND_SPREAD  # the percentiles alone call it one speed
+    assert s.band_time >= BAND_TIME
+    assert REGISTRY["viscous_friction"].why_not(s) is None
+    # the same top speed without the run-up (no time below the band) is one speed
+    flat = dataclasses.replace(s, band_time=0.5 * BAND_TIME)
+    assert "band of speeds" in REGISTRY["viscous_friction"].why_not(flat)
+
+
 def test_kinematic_error_shows_on_a_part_turn_crossed_back_and_forth():
     """Kinematic error is a function of the WG angle: a record that crosses a part of a
     turn back and forth shows it (the transmission error repeats at the same angles); one

@@ -8,7 +8,7 @@ import numpy as np
 from hdgym.params import JointParams
 
 from . import residuals as R
-from .effect import Scales
+from .effect import BAND_SPREAD, Scales
 from .friction_effects import RIPPLE_ORDERS
 from .gear_effects import ke_lines
 from .restarts import REST_PAUSE, pauses
@@ -103,6 +103,9 @@ class RecordScales:
         wm = w[moving]
         spread = (float(np.quantile(wm, 0.9)) / max(float(np.quantile(wm, 0.1)), 1e-12)
                   if wm.size > 10 else 1.0)
+        # how long the record moves in the lower part of the band (a run-up's passage)
+        band_time = (float(np.count_nonzero(wm < np.quantile(wm, 0.9) / BAND_SPREAD)) * self.dt
+                     if wm.size > 10 else 0.0)
         standstills = 0 if self.inverse else int(np.size(getattr(self, "rest_points", ())))
         kt_out = p.motor.torque_constant * self.ratio
         i_peak = p.amplifier.current_limit
@@ -117,7 +120,7 @@ class RecordScales:
             transmitted = np.abs(self.t_ext + p.load.torque + p.load.inertia * acc)
         return {"moving": float(np.mean(moving)), "reversals": reversals,
                 "standstills": standstills, "wg_turns": float(np.ptp(c.theta_m)) / (2 * np.pi),
-                "speed_spread": spread,
+                "speed_spread": spread, "band_time": band_time,
                 "torsion_measured": bool(self.locked or sensor
                                          or "transmission_error" in self.names),
                 "te_measured": "transmission_error" in self.names,
