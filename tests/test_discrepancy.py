@@ -690,3 +690,25 @@ def test_ordered_map_keeps_the_order_in_worker_processes():
 
     assert list(ordered_map(abs, [-1, 2, -3], jobs=2)) == [1, 2, 3]
     assert list(ordered_map(abs, [-4], jobs=2)) == [4]
+
+
+def test_setter_builds_each_joint_from_a_fresh_copy():
+    """A fit builds a joint from one template at every evaluation: a value set in one call
+    (nested items and the virtual fields included) must not leak into the next call or
+    into the joint the template came from."""
+    from hdgym.discrepancy.paths import get_value, set_values, setter
+    from hdgym.params import preset
+
+    p = preset("tuttle-joint1")
+    put = setter(p)
+    ke = "kinematic_error.harmonics[0].sin"
+    excess = "friction.output.breakaway_excess"
+    a = put({ke: 0.5 * get_value(p, ke), excess: 0.25, "motor.inertia": 2e-5})
+    b = put({"motor.inertia": 3e-5})
+    assert get_value(a, ke) == pytest.approx(0.5 * get_value(p, ke))
+    assert get_value(a, excess) == pytest.approx(0.25)
+    for q in (b, p):
+        assert get_value(q, ke) == get_value(p, ke)
+        assert get_value(q, excess) == get_value(p, excess)
+    assert b.motor.inertia == 3e-5 and p.motor.inertia != 2e-5
+    assert b == set_values(p, {"motor.inertia": 3e-5})

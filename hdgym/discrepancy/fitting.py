@@ -15,7 +15,7 @@ from scipy.optimize import least_squares
 from hdgym.params import JointParams
 
 from .effect import FitParam
-from .paths import get_value, set_values
+from .paths import get_value, setter
 from .problem import BAD, Problem
 
 
@@ -83,9 +83,11 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     x0 = np.clip(x0, lo, hi)
     span = hi - lo
 
+    put = setter(p)
+
     def build(z: np.ndarray) -> JointParams:
         x = lo + (np.clip(z, 1.0, 2.0) - 1.0) * span
-        return set_values(p, {fp.path: float(v) for fp, v in zip(fps, x, strict=True)})
+        return put({fp.path: float(v) for fp, v in zip(fps, x, strict=True)})
 
     def fun(z: np.ndarray) -> np.ndarray:
         try:

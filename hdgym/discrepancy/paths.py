@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from functools import lru_cache
 from typing import Any
 
 from hdgym.params import JointParams, from_dict, to_dict
@@ -21,17 +22,19 @@ from hdgym.params import JointParams, from_dict, to_dict
 _TOKEN = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 
-def _tokens(path: str) -> list[tuple[str, int | None]]:
+@lru_cache(maxsize=4096)
+def _tokens(path: str) -> tuple[tuple[str, int | None], ...]:
+    # cached: a fit parses the same few dozen paths at every residual evaluation
     out = []
     for part in path.split("."):
         m = _TOKEN.match(part)
         if not m:
             raise ValueError(f"unknown parameter {path!r}")
         out.append((m.group(1), None if m.group(2) is None else int(m.group(2))))
-    return out
+    return tuple(out)
 
 
-def _walk(d: Any, toks: list[tuple[str, int | None]], path: str) -> Any:
+def _walk(d: Any, toks: tuple[tuple[str, int | None], ...], path: str) -> Any:
     for name, idx in toks:
         if not isinstance(d, Mapping) or name not in d:
             raise ValueError(f"unknown parameter {path!r}")
@@ -105,11 +108,33 @@ def get_value(p: JointParams, path: str) -> float:
 
 def set_values(p: JointParams, values: Mapping[str, float]) -> JointParams:
     """A validated copy of ``p`` with every ``path -> value`` of ``values`` set."""
-    d = to_dict(p)
-    for path, v in values.items():
-        set_in_dict(d, path, v)
-    fix_sides(d)
-    return from_dict(d, "params")
+    return setter(p)(values)
+
+
+def setter(p: JointParams) -> Callable[[Mapping[str, float]], JointParams]:
+    """:func:`set_values` on ``p`` as a function of the values alone, for many calls on one
+    ``p`` (a fit builds a joint at every residual evaluation): ``p``'s mapping is made
+    once and copied for each call."""
+    plain = to_dict(p)
+
+    def put(values: Mapping[str, float]) -> JointParams:
+        d = _copy(plain)
+        for path, v in values.items():
+            set_in_dict(d, path, v)
+        fix_sides(d)
+        return from_dict(d, "params")
+
+    return put
+
+
+def _copy(x: Any) -> Any:
+    """A copy of a mapping of tables, lists and numbers (:func:`to_dict`'s shape) that
+    shares only the immutable leaves."""
+    if isinstance(x, dict):
+        return {k: _copy(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_copy(v) for v in x]
+    return x
 
 
 def assign(d: dict[str, Any], path: str, value: Any) -> None:
