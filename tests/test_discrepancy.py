@@ -361,6 +361,14 @@ def test_a_run_up_from_rest_shows_a_band_of_speeds():
     # the same top speed without the run-up (no time below the band) is one speed
     flat = dataclasses.replace(s, band_time=0.5 * BAND_TIME)
     assert "band of speeds" in REGISTRY["viscous_friction"].why_not(flat)
+    # a base model that has viscous friction keeps its given coefficient on a run-up (it
+    # trades against inertia and Coulomb friction there) and refits it on spread speeds
+    from hdgym.discrepancy.registry import model_params
+
+    viscous = "friction.input.viscous"
+    assert viscous not in {fp.path for fp in model_params(truth, s, truth)}
+    spread = dataclasses.replace(s, speed_spread=2 * BAND_SPREAD)
+    assert viscous in {fp.path for fp in model_params(truth, spread, truth)}
 
 
 def test_kinematic_error_shows_on_a_part_turn_crossed_back_and_forth():
