@@ -349,6 +349,7 @@ def test_a_run_up_from_rest_shows_a_band_of_speeds():
 
     from hdgym.discrepancy.effect import BAND_SPREAD, BAND_TIME
     from hdgym.discrepancy.problem import Problem
+    from hdgym.discrepancy.registry import model_params
     from hdgym.params import preset
     from hdgym.sim import Simulator
 
@@ -363,8 +364,6 @@ def test_a_run_up_from_rest_shows_a_band_of_speeds():
     assert "band of speeds" in REGISTRY["viscous_friction"].why_not(flat)
     # a base model that has viscous friction keeps its given coefficient on a run-up (it
     # trades against inertia and Coulomb friction there) and refits it on spread speeds
-    from hdgym.discrepancy.registry import model_params
-
     viscous = "friction.input.viscous"
     assert viscous not in {fp.path for fp in model_params(truth, s, truth)}
     spread = dataclasses.replace(s, speed_spread=2 * BAND_SPREAD)
