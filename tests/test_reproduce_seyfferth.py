@@ -89,6 +89,18 @@ def test_rh25_stick_slip_below_2_5_hz():
     assert np.all(stuck_hi == 0), stuck_hi
 
 
+def test_rh25_stick_slip_ends_at_lower_frequencies_at_larger_amplitudes():
+    """The passage gives no amplitude: at 3 Hz the model sticks 17 % of the cycle at 1 A
+    (fig. 19's amplitude) and only for a moment (under 1 %) at 2 A, fig. 18's largest;
+    the boundary falls with the amplitude as the spring torque outgrows the startup
+    torque (§4.1)."""
+    p = preset("seyfferth-rh25")
+    f = np.array([3.0])
+    stuck = [S.gain_curve(p, a, f)[1][0] for a in (1.0, 1.5, 2.0)]
+    assert stuck[0] > 0.1 and stuck[0] > stuck[1] > stuck[2], stuck
+    assert stuck[2] < 0.01, stuck
+
+
 def test_no_stop_bound_puts_3_hz_beyond_fig_18():
     """Why item i is hard with the paper's own numbers: turning at 3 Hz without a stop
     needs a sinusoid larger than anything fig. 18 shows at 1 A (so only a response with

@@ -285,6 +285,13 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
             f"{fine[end]:.2f} Hz (scan 2-6 Hz by 0.05 Hz; the paper: below 2.5 Hz)"
             + (f"; above it, {later.size} frequencies show single stops of at most "
                f"{100 * later.max():.1f} % of the cycle" if later.size else ""))
+    # the passage names no amplitude: where the model's boundary sits at fig. 18's others
+    near = np.array([2.5, 3.0, 4.0])
+    item.measured.append(
+        "for information, the passage names no amplitude; at fig. 18's other amplitudes the "
+        "model's stuck fraction at " + " / ".join(f"{f:g}" for f in near) + " Hz is "
+        + ", ".join(f"{a:g} A " + " / ".join(f"{100 * x:.1f}" for x in gain_curve(p, a, near)[1])
+                    + " %" for a in (1.5, 2.0)))
     sim = simulator(p, locked_output=True, sensors=False)
     turn = first_stuck_turn(p, sim, 3.0)
     if turn is not None:
