@@ -101,11 +101,12 @@ class RecordScales:
         sgn = np.sign(c.speed[moving])
         reversals = int(np.count_nonzero(sgn[1:] != sgn[:-1]))
         wm = w[moving]
-        spread = (float(np.quantile(wm, 0.9)) / max(float(np.quantile(wm, 0.1)), 1e-12)
-                  if wm.size > 10 else 1.0)
-        # how long the record moves in the lower part of the band (a run-up's passage)
-        band_time = (float(np.count_nonzero(wm < np.quantile(wm, 0.9) / BAND_SPREAD)) * self.dt
-                     if wm.size > 10 else 0.0)
+        spread, band_time = 1.0, 0.0
+        if wm.size > 10:
+            top = float(np.quantile(wm, 0.9))
+            spread = top / max(float(np.quantile(wm, 0.1)), 1e-12)
+            # how long the record moves in the lower part of the band (a run-up's passage)
+            band_time = float(np.count_nonzero(wm < top / BAND_SPREAD)) * self.dt
         standstills = 0 if self.inverse else int(np.size(getattr(self, "rest_points", ())))
         kt_out = p.motor.torque_constant * self.ratio
         i_peak = p.amplifier.current_limit

@@ -69,8 +69,7 @@ def judge(kt: float, damping: float) -> Point:
 
 def t3_passes(pt: Point) -> bool:
     """T3's criteria on a point's statistic."""
-    lo, hi = tuttle_steps.TORQUE_PEAK_BAND
-    return bool(lo <= pt.t3_peak <= hi and pt.t3_mean <= tuttle_steps.TORQUE_MEAN_TOL)
+    return tuttle_steps.torque_peak_ok(pt.t3_peak) and tuttle_steps.torque_mean_ok(pt.t3_mean)
 
 
 def choose(grid: dict[tuple[int, int], Point], shape: tuple[int, int]) -> Point | None:

@@ -52,6 +52,16 @@ PROMINENCE = 1.3
 TORQUE_MEAN_TOL = 10.0
 TORQUE_PEAK_BAND = (60.0, 110.0)
 
+
+def torque_mean_ok(worst: float) -> bool:
+    """T3's first criterion on the largest |mean torque| over the plateau currents, N m."""
+    return bool(abs(worst) <= TORQUE_MEAN_TOL)
+
+
+def torque_peak_ok(top: float) -> bool:
+    """T3's second criterion on the largest |torque| over the plateau currents, N m."""
+    return bool(TORQUE_PEAK_BAND[0] <= top <= TORQUE_PEAK_BAND[1])
+
 P87 = "§2.6 p. 87"
 J1_SPEEDS = ("two separate resonances can be observed at input speeds of around 4000 and 8000 "
              f"degrees/second ({P87})")
@@ -295,13 +305,11 @@ def check_joint1_torque(out: Path, quick: bool) -> Item:
     peaks = runs.torque_peak[a: b + 1]
     worst = float(means[np.argmax(np.abs(means))])
     item.check("joint 1: torque mean at the plateau", TORQUE_ZERO, "0 N m", "±10 N m",
-               f"{worst:+.1f} N m (largest of {cur[a]:g}-{cur[b]:g} A)",
-               bool(np.all(np.abs(means) <= TORQUE_MEAN_TOL)))
+               f"{worst:+.1f} N m (largest of {cur[a]:g}-{cur[b]:g} A)", torque_mean_ok(worst))
     top = float(peaks.max())
     item.check("joint 1: torque peak at the plateau", TORQUE_80, "80 N m",
                f"{TORQUE_PEAK_BAND[0]:.0f}-{TORQUE_PEAK_BAND[1]:.0f} N m",
-               f"{top:.0f} N m (at {cur[a + int(np.argmax(peaks))]:g} A)",
-               bool(TORQUE_PEAK_BAND[0] <= top <= TORQUE_PEAK_BAND[1]))
+               f"{top:.0f} N m (at {cur[a + int(np.argmax(peaks))]:g} A)", torque_peak_ok(top))
     item.passed = all(c.passed for c in item.checks)
     item.measured.append(
         "friction in the mesh (the preset): per plateau current " + "; ".join(
