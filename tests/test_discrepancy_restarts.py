@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import make_joint
 
+from hdgym.discrepancy import cases
+from hdgym.discrepancy import residuals as R
 from hdgym.discrepancy import restarts as RS
+from hdgym.discrepancy.paths import set_values
 from hdgym.discrepancy.problem import Problem, with_sample_time
 from hdgym.effects import flags_of
 from hdgym.params import preset
 from hdgym.physics import layout as L
-from hdgym.sim import Simulator
+from hdgym.sim import SimulationError, Simulator
 
 
 def _exact(name: str, command: str, duration: float, segment: float) -> dict[str, float]:
@@ -78,3 +82,121 @@ def test_placed_torsion_carries_the_torque_asked_for(name):
         RS.place_motor(moved, row, ke, ratio, x[L.TH_M], x[L.W_M], new, rate)
         _, _, _, s1 = step.trajectory(u[k:k + 2], state=moved)
         assert s1[1, L.TK] - s0[1, L.TK] == pytest.approx(dq, rel=0.02), (name, k)
+
+
+# -- the compiled segment runs (restarts.run_segments) against the loop they replaced
+
+def _reference_states(prob: Problem, p) -> np.ndarray:
+    """Problem.predict's segment loop before the compiled runs: each segment by
+    Simulator.states, each restart in Python (the drift restart written out)."""
+    p = with_sample_time(p, prob.dt)
+    sim = Simulator(p, locked_output=prob.locked, sensors=False)
+    ke_on = "kinematic_error" in p.effects
+    x0 = sim.initial_state(float(prob.raw.motor_angle[0]))
+    n = prob.u.size
+    seg = max(int(round(prob.segment / prob.dt)), 2)
+    st = np.empty((n, L.N_STATE))
+    a = 0
+    rest = prob.rest_points
+    jump = np.zeros(2)
+    while a < n:
+        b = min(a + seg, n)
+        j = int(np.searchsorted(rest, a, side="right"))
+        at_rest = j < rest.size and rest[j] <= b
+        if at_rest:
+            b = int(rest[j])
+        else:
+            while b < n and not prob.x_moving[b]:
+                b += 1
+        if n - b < 2:
+            b, at_rest = n, False
+        e = min(b + 1, n)
+        part = sim.states(prob.u[a:e], prob.t_ext[a:e], x0)
+        st[a:b] = part[: b - a]
+        st[a:b, L.TH_M] -= jump[0]
+        st[a:b, L.TH_O] -= jump[1]
+        if b < n:
+            if at_rest or prob.locked:
+                x0 = prob._restart(part[b - a].copy(), b, p, sim.row, at_rest)
+            else:
+                end = part[: b - a + 1]
+                h = max((b - a) // 2, 2)
+                d_angle, d_speed = RS.drift(prob.x_rest_angle[b - h:b + 1],
+                                            end[-h - 1:, L.TH_M], prob.dt)
+                x0 = RS.shifted(end[-1], sim.row, ke_on, prob.ratio, d_angle, d_speed)
+                if prob.x_cur is not None:
+                    x0[L.CUR] = prob.x_cur[b]
+            if at_rest and not prob.locked:
+                jump[0] += x0[L.TH_M] - part[b - a, L.TH_M]
+                jump[1] += x0[L.TH_O] - part[b - a, L.TH_O]
+        a = b
+    return st
+
+
+def _reference_predict(prob: Problem, p) -> dict[str, np.ndarray]:
+    st = _reference_states(prob, p)
+    mc, oc = prob.counts
+    raw = R.Raw(motor_angle=R.quantize(st[:, L.TH_M], mc),
+                output_angle=None if prob.locked else R.quantize(st[:, L.TH_O], oc),
+                output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
+    return R.channels(raw, prob.names, prob.ratio, prob.dt, prob.cutoff)
+
+
+def _compiled_states(prob: Problem, p) -> np.ndarray:
+    """The states the compiled runs give (what Problem.predict filters into channels)."""
+    p = with_sample_time(p, prob.dt)
+    sim = Simulator(p, locked_output=prob.locked, sensors=False)
+    x0 = sim.initial_state(float(prob.raw.motor_angle[0]))
+    return prob._shoot(sim, p, x0, max(int(round(prob.segment / prob.dt)), 2))
+
+
+def _stick_slip():
+    case = cases.Case("stiction", ("stiction",), "breakaway_ramps", 2.0)
+    truth = cases.truth_for(case)
+    return cases.records(case, truth, 2.0)[0], truth
+
+
+def _moving():
+    p = preset("tuttle-joint1")
+    return Simulator(p).run("sine:7.8:1", 1.5, seed=2), p
+
+
+def _locked():
+    p = preset("tuttle-joint1")
+    return Simulator(p, locked_output=True).run("sine:2:1", 1.5, seed=2), p
+
+
+@pytest.mark.parametrize("make", [_stick_slip, _moving, _locked])
+def test_compiled_segments_match_the_python_loop_bit_for_bit(make):
+    rec, truth = make()
+    prob = Problem(rec, truth)
+    if make is _stick_slip:
+        assert prob.rest_points.size >= 3 and not prob.locked
+    if make is _locked:
+        assert prob.locked and prob.rest_points.size
+    models = (truth, truth.without("kinematic_error"),
+              set_values(truth, {"friction.output.coulomb":
+                                 1.1 * truth.friction.output.coulomb}))
+    for segment in (0.1, 0.2):
+        prob.segment = segment
+        for p in models:
+            new, old = prob.predict(p), _reference_predict(prob, p)
+            assert new.keys() == old.keys()
+            for k in old:
+                assert np.array_equal(new[k], old[k]), (segment, k)
+            # all states too (the channels compared need not show every one)
+            assert np.array_equal(_compiled_states(prob, p), _reference_states(prob, p))
+    assert len(prob._schedules) == 2  # one schedule per horizon, reused across models
+
+
+def test_compiled_segments_raise_the_same_divergence():
+    p = make_joint()
+    u = np.where(np.arange(1000) < 350, 0.0, 6.0)
+    prob = Problem(Simulator(p).run(u), p, segment=0.1)
+    bad = p.set("integration.n_substeps", 1).set("compliance.stiffness", 6e9)
+    with pytest.raises(SimulationError) as old:
+        _reference_predict(prob, bad)
+    with pytest.raises(SimulationError) as new:
+        prob.predict(bad)
+    assert str(new.value) == str(old.value)
+    assert "diverged at t = " in str(new.value)

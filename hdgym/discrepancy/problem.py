@@ -29,7 +29,7 @@ import numpy as np
 from hdgym.params import Integration, JointParams
 from hdgym.physics import layout as L
 from hdgym.record import Record
-from hdgym.sim import SimulationError, Simulator
+from hdgym.sim import SimulationError, Simulator, diverged_message
 
 from . import orders as O
 from . import residuals as R
@@ -38,7 +38,7 @@ from .effect import Scales
 from .inverse import InverseComparison
 from .noise import noise_nmse, pick_channels
 from .record_scales import RecordScales
-from .restarts import Restarts, shifted
+from .restarts import Restarts, run_segments, shifted
 
 BAD = 10.0  # residual per sample (in channel sigmas) of a run that diverged
 
@@ -288,49 +288,49 @@ class Problem(Restarts, InverseComparison, RecordScales):
             return self._predict_lines(p)
         p = with_sample_time(p, self.dt)
         sim = Simulator(p, locked_output=self.locked, sensors=False)
-        ke_on = "kinematic_error" in p.effects
         x0 = sim.initial_state(float(self.raw.motor_angle[0]))
         n = self.u.size
         seg = n if not self.segment else max(int(round(self.segment / self.dt)), 2)
         if seg >= n:
             _, _, _, st = sim.trajectory(self.u, load_torque=self.t_ext, state=x0)
         else:
-            st = np.empty((n, L.N_STATE))
-            a = 0
-            rest = self.rest_points
-            # a restart at rest may move a model that is still running back onto the measured
-            # angle; the compared channels follow the model's own (continuous) angle, so the
-            # jump does not show as a spike in the differentiated speed
-            jump = np.zeros(2)
-            while a < n:
-                b = min(a + seg, n)
-                j = int(np.searchsorted(rest, a, side="right"))
-                at_rest = j < rest.size and rest[j] <= b
-                if at_rest:  # a pause starts before the segment would end: restart at rest
-                    b = int(rest[j])
-                else:
-                    while b < n and not self.x_moving[b]:  # never restart a joint mid-pause
-                        b += 1
-                if n - b < 2:
-                    b, at_rest = n, False
-                e = min(b + 1, n)
-                part = sim.states(self.u[a:e], self.t_ext[a:e], x0)
-                st[a:b] = part[: b - a]
-                st[a:b, L.TH_M] -= jump[0]
-                st[a:b, L.TH_O] -= jump[1]
-                if b < n:
-                    x0 = (self._restart(part[b - a].copy(), b, p, sim.row, at_rest)
-                          if at_rest or self.locked
-                          else self._drift_restart(part[: b - a + 1], a, sim.row, ke_on))
-                    if at_rest and not self.locked:  # (locked: the angle is the channel)
-                        jump[0] += x0[L.TH_M] - part[b - a, L.TH_M]
-                        jump[1] += x0[L.TH_O] - part[b - a, L.TH_O]
-                a = b
+            st = self._shoot(sim, p, x0, seg)
         mc, oc = self.counts
         raw = R.Raw(motor_angle=R.quantize(st[:, L.TH_M], mc),
                     output_angle=None if self.locked else R.quantize(st[:, L.TH_O], oc),
                     output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
         return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
+
+    def _shoot(self, sim: Simulator, p: JointParams, x0: np.ndarray, seg: int) -> np.ndarray:
+        """The model's states over the record run from ``x0`` in segments of ``seg`` samples
+        (:meth:`.restarts.Restarts._blocks`), shape ``(n, N_STATE)``: each block of drift
+        restarts in one compiled call (:func:`.restarts.run_segments`), the restarts at rest
+        and on a locked output here (raises SimulationError)."""
+        n = self.u.size
+        st = np.empty((n, L.N_STATE))
+        ke_on = "kinematic_error" in p.effects
+        dt_sub = sim.ctrl_dt / sim.n_substeps  # as Simulator.states has it
+        # a restart at rest may move a model that is still running back onto the measured
+        # angle; the compared channels follow the model's own (continuous) angle, so the
+        # jump does not show as a spike in the differentiated speed
+        jump = np.zeros(2)
+        for bounds, at_rest in self._blocks(seg):
+            i, bad = run_segments(x0, sim.row, sim.flags, dt_sub, sim.n_substeps, self.u,
+                                  self.t_ext, bounds, self.x_rest_angle, self._cur, ke_on,
+                                  self.ratio, self.dt, st)
+            if bad >= 0:  # the diverged segment's steps, as Simulator.states names them
+                a = int(bounds[i])
+                raise SimulationError(diverged_message(st[a + 1:min(int(bounds[i + 1]) + 1, n)],
+                                                       bad, sim.ctrl_dt))
+            a, b = int(bounds[0]), int(bounds[-1])
+            st[a:b, L.TH_M] -= jump[0]  # jump changes only at rest, between blocks
+            st[a:b, L.TH_O] -= jump[1]
+            if b < n:  # st[b]: the model's own state there, until the next block writes it
+                x0 = self._restart(st[b].copy(), b, p, sim.row, at_rest)
+                if at_rest and not self.locked:  # (locked: the angle is the channel)
+                    jump[0] += x0[L.TH_M] - st[b, L.TH_M]
+                    jump[1] += x0[L.TH_O] - st[b, L.TH_O]
+        return st
 
     def _predict_lines(self, p: JointParams) -> dict[str, np.ndarray]:
         """The model's line coefficients (:mod:`.orders`), run window by window.
