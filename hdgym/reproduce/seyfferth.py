@@ -252,7 +252,11 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
     item = Item("i", "RH-25 stick-slip below 2.5 Hz, none above (Seyfferth §4.1, fig. 19)",
                 'paper: "For excitation frequencies f < 2.5 Hz, the system response contained '
                 'stick-slip cycles that disappeared at higher frequencies" (fig. 19: i_m = 1 amp, '
-                "f = 1 Hz and 4 Hz). Model: seyfferth-rh25, output locked, 1 A sine; criterion: "
+                "f = 1 Hz and 4 Hz). The passage follows fig. 18 (1, 1.5 and 2 A) and names no "
+                "amplitude, so it is read as holding at each; it binds at the smallest, 1 A "
+                "(fig. 19's), where the stick-slip reaches highest in frequency (\"with "
+                "increasing vibration amplitudes [...] the resulting motion approaches a "
+                "sinusoidal signal\"). Model: seyfferth-rh25, output locked, 1 A sine; criterion: "
                 "the motor sticks (speed exactly zero) during part of each cycle at 1, 1.5 and "
                 "2 Hz, and never at 3, 4 and 5 Hz")
     p = preset("seyfferth-rh25")
@@ -285,10 +289,11 @@ def check_stick_slip(out: Path, quick: bool) -> Item:
             f"{fine[end]:.2f} Hz (scan 2-6 Hz by 0.05 Hz; the paper: below 2.5 Hz)"
             + (f"; above it, {later.size} frequencies show single stops of at most "
                f"{100 * later.max():.1f} % of the cycle" if later.size else ""))
-    # the passage names no amplitude: where the model's boundary sits at fig. 18's others
+    # the passage holds at each of fig. 18's amplitudes: where the model's boundary sits at
+    # the other two (the criterion takes 1 A, where it binds)
     near = np.array([2.5, 3.0, 4.0])
     item.measured.append(
-        "for information, the passage names no amplitude; at fig. 18's other amplitudes the "
+        "for information, at fig. 18's other amplitudes (the passage holds at each) the "
         "model's stuck fraction at " + " / ".join(f"{f:g}" for f in near) + " Hz is "
         + ", ".join(f"{a:g} A " + " / ".join(f"{100 * x:.1f}" for x in gain_curve(p, a, near)[1])
                     + " %" for a in (1.5, 2.0)))
