@@ -325,7 +325,7 @@ def main(argv: list[str] | None = None) -> int:
         "*horizon* while the joint moves, the model's slow drift from the measured motor "
         "angle is removed (a straight line fitted to measured minus model motor angle over "
         "the segment's last half shifts its motor angle and speed; its torsion and its own "
-        "ringing stay, `hdgym.discrepancy.restarts.Restarts._drift_restart`), and early in "
+        "ringing stay, `hdgym.discrepancy.restarts.drift_restart`), and early in "
         "each pause (no encoder count for 30 ms) it restarts from the exact measured rest "
         "state where it can stand still there, so a model that breaks away too early or too "
         "late still shows it, and a small speed or phase error cannot build up into a drift "

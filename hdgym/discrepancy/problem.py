@@ -47,7 +47,7 @@ HORIZONS = (0.5, 0.2, 0.1)
 """Prediction horizons, s, :meth:`Problem.choose_horizon` chooses from.
 
 No shorter ones: a moving restart removes only the model's slow drift
-(:meth:`.restarts.Restarts._drift_restart`), so a long horizon no longer lets a phase slip
+(:func:`.restarts.drift_restart`), so a long horizon no longer lets a phase slip
 build up, while on a short one that correction acts like an observer that absorbs the
 model's error (with 0.05 and 0.025 s allowed, the tuned stiction case chose 0.05 s, where
 the cost falls towards a breakaway torque 35 % too high, and cut its gap by 55 %; from
@@ -98,7 +98,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
             seconds (multiple shooting); at each segment's end a moving model
             keeps its own state but its slow drift from the measured motor
             angle is removed and it takes the measured current
-            (:meth:`.restarts.Restarts._drift_restart`), so a small speed error
+            (:func:`.restarts.drift_restart`), so a small speed error
             cannot grow into a position drift that scrambles position-periodic
             effects (0 or None: one run). Restarts happen only while the measured
             joint moves (faster than 10 % of its typical speed), or early in a

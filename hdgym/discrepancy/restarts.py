@@ -4,7 +4,7 @@ A free-output record is simulated in segments (:meth:`.problem.Problem.predict`)
 segment's end the model is brought back to the record. :class:`Restarts` (a part of
 :class:`.problem.Problem`) finds the pauses (no encoder count for :data:`REST_PAUSE`) and
 builds the restart state: while the joint moves, the model's own state with only its slow
-drift from the measured motor angle removed (:meth:`Restarts._drift_restart`); at rest, the
+drift from the measured motor angle removed (:func:`drift_restart`); at rest, the
 measured state, with the measured held torque where a torque sensor has one and the model
 can hold it.
 """
@@ -218,10 +218,34 @@ def motor_drift(part: np.ndarray, a: int, rest_angle: np.ndarray,
 @_njit
 def drift_restart(part: np.ndarray, a: int, rest_angle: np.ndarray, cur: np.ndarray,
                   row: np.ndarray, ke_on: bool, ratio: float, dt: float) -> np.ndarray:
-    """The restart state at the end of segment ``part`` (sim states of samples ``a`` ..
-    ``b``, ``b`` last) with only its motor drift (:func:`motor_drift`) removed
-    (:meth:`Restarts._drift_restart` says why); ``cur``: the measured filtered current,
-    A, per sample (empty: the record has none, the model keeps its own)."""
+    """The sim state at the end of segment ``part`` (states of samples ``a`` .. ``b``, the
+    restart point ``b`` last) with only its slow drift from the measured motor angle
+    removed: the straight line fitted to the measured (``rest_angle``: raw, count-centred,
+    rad per sample) minus the simulated motor angle over the segment's last half
+    (:func:`motor_drift`) moves the motor angle and speed (:func:`shifted`). The torsion and
+    its rate, the hysteresis memory and the model's own ringing stay, and the current is the
+    measured one (``cur``: filtered, A, per sample; empty: the record has none, the model
+    keeps its own). ``row``: the model's packed parameters
+    (:func:`hdgym.physics.layout.pack`); ``ke_on``: its kinematic error is on; ``ratio``:
+    the gear ratio; ``dt``: the sample time, s.
+
+    The torsion is not moved towards a torque sensor's reading: a line fitted to the
+    measured minus the model's torque over the segment's end also fits the ringing, and
+    its rate, put into the torsion rate, fed the next segment's ringing (the true
+    seyfferth-rh32 / viscous_friction, seed 50, left 0.87 % at a 0.1 s horizon with it,
+    0.02 % without); on the 54 free-output development cases with a torque sensor
+    (hold-out seeds 14, 26, 38 and 50) it lowered the true joint's NMSE on none by a
+    clear margin and raised it on several (wave-drive-50 / Stribeck, seed 14: 0.12 %
+    against 0.02 % at 0.2 s).
+
+    Restarting on the filtered measured speed instead (what :meth:`Restarts._restart` does
+    at rest and on a locked output) drops the ringing above the filter's cutoff that the
+    model's torsion rate still carries: each restart then injects a speed error, and the
+    true joint itself left up to 11 % on the hold-out cases (tuttle-joint1 /
+    amplifier_saturation, seed 14: 7.3 % at a 0.1 s horizon, 0.003 % with this restart;
+    tuttle-joint3 with nothing hidden: 3.3 %, 1.3 % with the motor's drift removed; both
+    measured on the earlier validation records).
+    """
     d_angle, d_speed = motor_drift(part, a, rest_angle, dt)
     x = shifted(part[part.shape[0] - 1], row, ke_on, ratio, d_angle, d_speed)
     if cur.size:
@@ -333,7 +357,7 @@ class Restarts:
                  at_rest: bool = False) -> np.ndarray:
         """Sim state ``x`` at sample ``k`` moved onto the measured state: a locked output's
         motor angle and speed (filtered; the counted angle and zero at rest), or a free
-        output at a rest point (a moving free output restarts by :meth:`_drift_restart`).
+        output at a rest point (a moving free output restarts by :func:`drift_restart`).
 
         At rest the speeds are zero, the motor angle is the counted one and the output
         follows with the simulation's own torsion (and hysteresis memory); with a torque
@@ -352,7 +376,7 @@ class Restarts:
             x[L.DTH] = x[L.TH_M] / r - ke_at(row, x[L.TH_M], ke_on)[0] - x[L.TH_O]
             return x
         if not at_rest:
-            raise ValueError("a moving free output restarts by _drift_restart")
+            raise ValueError("a moving free output restarts by drift_restart")
         own = x.copy()
         # the measured joint is still: exact zero speeds, the counted angle
         tors = torsion_and_rate(x, row, ke_on, r)[0]
@@ -388,41 +412,10 @@ class Restarts:
         (:func:`drift`)."""
         return motor_drift(part, a, self.x_rest_angle, self.dt)
 
-    def _drift_restart(self, part: np.ndarray, a: int, row: np.ndarray, ke_on: bool
-                       ) -> np.ndarray:
-        """The sim state at the end of segment ``part`` (states of samples ``a`` .. ``b``,
-        the restart point ``b`` last) with only its slow drift from the measured motor angle
-        removed: the straight line fitted to the measured (raw, count-centred) minus the
-        simulated motor angle over the segment's last half (:func:`drift`) moves the
-        motor angle and speed (:func:`shifted`). The torsion and its rate, the hysteresis
-        memory and the model's own ringing stay, and the current is the measured one.
-        ``row``: the model's packed parameters (:func:`hdgym.physics.layout.pack`);
-        ``ke_on``: its kinematic error is on.
-
-        The torsion is not moved towards a torque sensor's reading: a line fitted to the
-        measured minus the model's torque over the segment's end also fits the ringing, and
-        its rate, put into the torsion rate, fed the next segment's ringing (the true
-        seyfferth-rh32 / viscous_friction, seed 50, left 0.87 % at a 0.1 s horizon with it,
-        0.02 % without); on the 54 free-output development cases with a torque sensor
-        (hold-out seeds 14, 26, 38 and 50) it lowered the true joint's NMSE on none by a
-        clear margin and raised it on several (wave-drive-50 / Stribeck, seed 14: 0.12 %
-        against 0.02 % at 0.2 s).
-
-        Restarting on the filtered measured speed instead (what :meth:`_restart` does at
-        rest and on a locked output) drops the ringing above the filter's cutoff that the
-        model's torsion rate still carries: each restart then injects a speed error, and the
-        true joint itself left up to 11 % on the hold-out cases (tuttle-joint1 /
-        amplifier_saturation, seed 14: 7.3 % at a 0.1 s horizon, 0.003 % with this restart;
-        tuttle-joint3 with nothing hidden: 3.3 %, 1.3 % with the motor's drift removed; both
-        measured on the earlier validation records).
-        """
-        return drift_restart(part, a, self.x_rest_angle, self._cur, row, ke_on, self.ratio,
-                             self.dt)
-
     def _blocks(self, seg: int) -> list[tuple[np.ndarray, bool]]:
         """The record's run in segments of ``seg`` samples, grouped into blocks that
         :func:`run_segments` runs in one call: ``(bounds, at_rest)``, the segments
-        ``bounds[i]`` .. ``bounds[i + 1]`` restarting by :meth:`_drift_restart` between
+        ``bounds[i]`` .. ``bounds[i + 1]`` restarting by :func:`drift_restart` between
         them, and the block's end ``bounds[-1]`` restarting by :meth:`_restart` (at rest
         when ``at_rest``), or the record's end.
 
