@@ -224,8 +224,8 @@ def test_pattern_search_follows_a_staircase_cost():
 
 class _ParamStairs:
     """A stand-in problem whose residual moves in steps of a third of a per cent of each
-    parameter (like a cost over encoder counts and whole substeps): between the fine
-    difference step of least squares and the coarse one."""
+    parameter (like a cost over encoder counts and whole substeps): wider than the forward
+    difference step of least squares, narrower than the central one's span."""
 
     names = ("x",)
     stick_slip = False
@@ -249,7 +249,7 @@ class _ParamStairs:
         return {"x": v, "mean": v}
 
 
-def test_base_fit_with_a_coarse_step_crosses_a_staircase_cost():
+def test_central_differences_cross_a_staircase_cost():
     from hdgym.discrepancy.effect import FitParam
     from hdgym.discrepancy.fitting import fit
     from hdgym.params import preset
@@ -261,11 +261,11 @@ def test_base_fit_with_a_coarse_step_crosses_a_staircase_cost():
            for path in _ParamStairs.paths]
     prob = _ParamStairs(truth)
     fine = fit(prob, p, fps, max_nfev=20)
-    both = fit(prob, p, fps, max_nfev=20, coarse=True)
-    assert fine.nmse["mean"] > 0.5  # the fine difference step sees flat stairs and stops
-    assert both.nmse["mean"] < 0.01 * fine.nmse["mean"]
+    central = fit(prob, p, fps, max_nfev=20, central=True)
+    assert fine.nmse["mean"] > 0.5  # the fine forward step sees flat stairs and stops
+    assert central.nmse["mean"] < 0.01 * fine.nmse["mean"]
     for path in _ParamStairs.paths:
-        assert both.values[path] == pytest.approx(get_value(truth, path), rel=0.005)
+        assert central.values[path] == pytest.approx(get_value(truth, path), rel=0.005)
 
 
 def test_ke_lines_follow_the_simulator_split():

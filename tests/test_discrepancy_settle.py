@@ -55,11 +55,22 @@ def test_converge_refits_until_the_cost_stops_falling():
     t = np.linspace(0.0, 1.0, 60)
     prob = _Record(truth, np.column_stack([np.sin(5 * t), np.sin(5 * t) + 0.02 * t]))
     p0 = _start(truth, 1.3, 0.75)
-    one = fit(prob, p0, _fps(truth), max_nfev=3, coarse=True)
+    one = fit(prob, p0, _fps(truth), max_nfev=3, central=True)
     more = S.converge(prob, p0, _fps(truth), 3, rounds=20)
     assert more.cost < 0.01 * one.cost
     for k in PATHS:
         assert get_value(more.params, k) == pytest.approx(get_value(truth, k), rel=0.01)
+
+
+def test_converge_takes_central_differences(monkeypatch):
+    """Every fit that is judged once converged takes central differences (forward ones stop
+    on the staircase of encoder counts and substeps: :data:`.fitting.CENTRAL_STEP`)."""
+    truth = preset("tuttle-joint3")
+    r = FitResult(truth, {}, {"mean": 1.0}, 0, 0.01)
+    seen = []
+    monkeypatch.setattr(S, "fit", lambda *a, **k: seen.append(k) or r)
+    S.converge(object(), truth, _fps(truth), 5, search=True)
+    assert seen and all(k["central"] is True and k["search"] is True for k in seen)
 
 
 def test_two_records_stack_both_residuals():

@@ -304,7 +304,9 @@ def main(argv: list[str] | None = None) -> int:
         "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
         "preferred to Stribeck friction when it achieves >= 75 % of its improvement "
         "(`hdgym.discrepancy.parsimony.PARSIMONY`); before an effect is named, a trial refit "
-        "that reaches half the relative cost reduction is judged after its polish (`NEAR`).",
+        "that reaches half the relative cost reduction is judged after its polish (`NEAR`), "
+        "against the base model refitted alike, on the training and the validation record, "
+        "both refitted until they converge (`hdgym.discrepancy.settle.converge`).",
         "",
         table(results),
         "",
@@ -370,9 +372,8 @@ def main(argv: list[str] | None = None) -> int:
         "the bend a refitted linear stiffness leaves stays. An effect found there is reported "
         "on the curve; a curve left above its noise with such an effect missing and "
         "explaining part of it is *unexplained*. Trial refits there get 3 x the trial "
-        "budget and the coarse difference step (`SPRING_TRIAL`; the curve is a staircase "
-        "in the parameters). A hardening spring is tried, on the curve and the time "
-        "channels, in two forms, a cubic and a knee "
+        "budget (`SPRING_TRIAL`; the curve is a staircase in the parameters). A hardening "
+        "spring is tried, on the curve and the time channels, in two forms, a cubic and a knee "
         "(two segments; `Effect.forms`): the trial refit starts from each.",
         "- On a free output whose time channels show nothing, with kinematic error or "
         "position-dependent friction missing, the line channels are searched the same way "
@@ -394,9 +395,12 @@ def main(argv: list[str] | None = None) -> int:
         "(running). That is also the `breakaway` signature: breakaway above running friction, "
         "the torque held while stuck beyond the running level, regressed against the "
         "residual. On records where the joint sticks, the trial refits start from the current "
-        "fit and from the given base values and keep the better fit, and the polish adds a "
-        "coordinate search (stick-slip makes the cost a fine staircase that a "
-        "finite-difference Jacobian cannot follow).",
+        "fit and from the given base values and keep the better fit.",
+        "- Every fit that is compared or judged once converged (an effect's trial refit, its "
+        "polish and the base model refitted alike that it is judged against, the settled base "
+        "model, the named model at the end) takes central differences "
+        "(`hdgym.discrepancy.fitting.CENTRAL_STEP`): stick-slip and encoder counts make the "
+        "cost a fine staircase on which forward differences stop short of the optimum.",
         "- Friction candidates start on each friction side alone as well as on both "
         "together (motor-side friction acts before the spring, output-side friction loads "
         "it: wave-drive-50's motor-side viscous friction was missed with both sides moved "

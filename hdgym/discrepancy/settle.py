@@ -8,13 +8,14 @@ that neither a missing effect nor the record's noise made:
 * the fit stopped short: a base model a few per cent off nominal may need more least-squares
   iterations than one fit's budget to reach its optimum (a voltage-limited run-up, where a
   few per cent of voltage limit move the top speed, starts at 170 % NMSE), or stops on the
-  quantization staircase of the fine difference step (:data:`.fitting.COARSE_STEP`).
-  :func:`converge` refits (coarse and fine steps) until a round gains less than
+  quantization staircase of a forward difference step (:data:`.fitting.CENTRAL_STEP`).
+  :func:`converge` refits (central differences) until a round gains less than
   :data:`SETTLE_TOL` of the cost;
 * the same holds of a model with effects named: the polish after each effect
-  (:func:`.workflow._search`) has one fit's budget, and its residual is judged against the
-  model's own floor and reported. Before that, :func:`converge_named` refits the final
-  model (base and named effects) until it converges;
+  (:func:`.workflow._search`) converges from where its trial refit left it (the valley the
+  base fit moved into to mimic the effect), and the final model's residual is judged
+  against its own floor and reported. Before that, :func:`converge_named` refits the final
+  model (base and named effects) until it converges, from the given core values too;
 * the training record does not pin the parameters the validation record shows: a record
   whose joint mostly sticks (a random command below the breakaway) leaves a valley of
   settings of inertia, spring and friction that fit it equally well, and the validation
@@ -49,13 +50,17 @@ SETTLE_ROUNDS = 4
 
 def converge(problem, p: JointParams, fps: list[FitParam], nfev: int,
              rounds: int = SETTLE_ROUNDS, **kw) -> FitResult:
-    """Refit ``fps`` from ``p`` (``nfev`` evaluations a round, coarse and fine difference
-    steps, further keywords to :func:`.fitting.fit`) until a round cuts the cost by less than
-    :data:`SETTLE_TOL` of it, or after ``rounds`` rounds; the cheapest fit."""
+    """Refit ``fps`` from ``p`` (``nfev`` evaluations a round, central differences, further
+    keywords to :func:`.fitting.fit`) until a round cuts the cost by less than
+    :data:`SETTLE_TOL` of it, or after ``rounds`` rounds; the cheapest fit.
+
+    Wherever the workflow compares fits refitted until they converge (an effect's polish
+    and its control, :func:`.workflow._search`; :func:`settle`; :func:`converge_named`),
+    both sides are refitted by this, so neither is credited with the other's slack."""
     best = None
     q = p
     for _ in range(rounds):
-        r = fit(problem, q, fps, max_nfev=nfev, coarse=True, **kw)
+        r = fit(problem, q, fps, max_nfev=nfev, central=True, **kw)
         if best is not None and not r.cost < best.cost:
             break
         gain = 1.0 if best is None else (best.cost - r.cost) / best.cost
@@ -113,7 +118,7 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
         if auto and not problem.inverse and choose is not None:
             choose(problem, vprob, refit.params)
             refit = rescored(problem, refit)
-        conclusion += (f"; the base model refitted (coarse and fine difference steps): NMSE "
+        conclusion += (f"; the base model refitted until it converged: NMSE "
                        f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
         current = refit
     alone = None if vprob is None else current.nmse["mean"]
@@ -136,8 +141,10 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
                    given: JointParams, nfev: int) -> FitResult | None:
     """The final model of a diagnosis that named effects, refitted until it converges.
 
-    Each effect's polish has one fit's budget; a model some per cent off nominal with a
-    new effect switched on may need more to reach its optimum (the hold-out case hdf40 /
+    Each effect's polish converges from its trial refit, in the valley the base fit moved
+    into to mimic the effect, and a model some per cent off nominal with a new effect
+    switched on may need more to reach its optimum (when the polish had one fit's budget,
+    the hold-out case hdf40 /
     coulomb_friction / sine:5.85:2, seed 26, stopped at 0.179 % on the training record;
     converged, 0.096 %; its validation NMSE 0.174 -> 0.112 %, though 0.174 % was already
     within the 2 x floor that reads *named*). Every parameter of the model
@@ -163,7 +170,7 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     # one fit's budget: a diagnosis of a 60 s record has to stay under 60 s), and from the
     # other only when the first's refit is refused
     v0 = vprob.nmse(current.params)["mean"] if vprob is not None else math.inf
-    firsts = sorted((fit(problem, q, fps, max_nfev=nfev, coarse=True)
+    firsts = sorted((fit(problem, q, fps, max_nfev=nfev, central=True)
                      for q in (current.params, set_values(current.params, core))),
                     key=lambda r: r.cost)
     for first in firsts:
