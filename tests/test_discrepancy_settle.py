@@ -171,3 +171,25 @@ def test_converge_named_also_starts_from_the_given_core(monkeypatch):
     assert get_value(out.params, PATHS[1]) == pytest.approx(get_value(truth, PATHS[1]),
                                                             rel=1e-3)
     assert out.cost < 1e-6 * stuck.cost
+
+
+def test_converge_named_also_starts_from_every_given_base_value(monkeypatch):
+    """The base fit may mimic a missing effect with parameters that are not core (motor-side
+    Coulomb friction and breakaway for output-side Coulomb friction); with the effect named
+    the refit stays in that valley from the model as it stands and from the given core.
+    The third start puts every parameter the given model fits itself back at its given
+    value and keeps the named effect's (here the inertia stands in for it)."""
+    truth = preset("tuttle-joint3")
+    fps = _fps(truth)
+    monkeypatch.setattr(S, "core_params", lambda p, scales: [])
+    monkeypatch.setattr(S, "model_params",
+                        lambda p, scales, given: fps[1:] if p is given else fps)
+    train = _Valley(truth, np.zeros((2, 2)))
+    moved = _start(truth, 1.1, 1.75)  # the stiffness in the false valley
+    stuck = S.converge(train, moved, fps, 20)
+    assert get_value(stuck.params, PATHS[1]) > 1.5 * get_value(truth, PATHS[1])
+    current = FitResult(moved, {}, train.nmse(moved), 0, train.nmse(moved)["mean"] / 100)
+    out = S.converge_named(train, None, current, truth, 20)
+    assert out is not None
+    for k in PATHS:
+        assert get_value(out.params, k) == pytest.approx(get_value(truth, k), rel=1e-3)
