@@ -46,7 +46,8 @@ depend on the number (tested). The bench's 60 s record: 48.6 -> 37.4 s, the same
 predictions."""
 DIFF_STEP = 1e-3
 """Forward finite-difference step, as a share of each parameter's range: the short fits
-(the base fit before the search, each step's control, the trial refits' ranking) use it."""
+(the base fit before the search, each step's control refit, the base refit on another
+comparison in :func:`.spring_search.search_view`) use it."""
 CENTRAL_STEP = 3e-3
 """Central finite-difference step, as a share of each parameter's range: every fit that is
 compared or judged once it has converged (``fit(..., central=True)``, :func:`.settle.converge`:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from functools import lru_cache
 from typing import Any
 
@@ -109,6 +109,15 @@ def get_value(p: JointParams, path: str) -> float:
 def set_values(p: JointParams, values: Mapping[str, float]) -> JointParams:
     """A validated copy of ``p`` with every ``path -> value`` of ``values`` set."""
     return setter(p)(values)
+
+
+def reset_to(p: JointParams, given: JointParams, paths: Iterable[str]) -> JointParams:
+    """``p`` with the parameters at ``paths`` back at their values in ``given``; ``p`` itself
+    when that joint does not validate (the caller can tell by identity)."""
+    try:
+        return set_values(p, {path: get_value(given, path) for path in paths})
+    except ValueError:
+        return p
 
 
 def setter(p: JointParams) -> Callable[[Mapping[str, float]], JointParams]:

@@ -37,7 +37,7 @@ from hdgym.params import JointParams
 from .effect import FitParam
 from .fitting import FitResult, fit, rescored
 from .outcome import at_noise_level
-from .paths import get_value, set_values
+from .paths import get_value, reset_to, set_values
 from .problem import Problem
 from .registry import core_params, model_params
 
@@ -171,17 +171,15 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     """
     fps = model_params(current.params, problem.scales, given)
     core = {fp.path: get_value(given, fp.path) for fp in core_params(given, problem.scales)}
-    base = {fp.path: get_value(given, fp.path) for fp in model_params(given, problem.scales,
-                                                                       given)}
-    # one round from each start, further rounds from the cheaper one first (each round is
+    base = reset_to(current.params, given,
+                    [fp.path for fp in model_params(given, problem.scales, given)])
+    # one round from each start, further rounds from the cheapest one first (each round is
     # one fit's budget: a diagnosis of a 60 s record has to stay under 60 s), and from the
-    # other only when the first's refit is refused
+    # others only when the first's refit is refused
     v0 = vprob.nmse(current.params)["mean"] if vprob is not None else math.inf
     starts = [current.params, set_values(current.params, core)]
-    try:
-        starts.append(set_values(current.params, base))
-    except ValueError:
-        pass
+    if base is not current.params:  # (a given base that does not validate: no third start)
+        starts.append(base)
     firsts = sorted((fit(problem, q, fps, max_nfev=nfev, central=True) for q in starts),
                     key=lambda r: r.cost)
     for first in firsts:

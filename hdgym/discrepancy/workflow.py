@@ -53,7 +53,7 @@ from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
 from .outcome import NOISE_FACTOR, carries_over, judge, judged_record, noise_hidden
 from .parsimony import NESTED, simpler_does_nearly_as_well
-from .paths import get_value, set_values
+from .paths import get_value, reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, _weighted, rank_candidates
 from .registry import REGISTRY, model_params
@@ -104,7 +104,7 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     # (the ranking found both for the same model; computed here only where it could not)
     q, q2 = cand.get("_start"), cand.get("_reset_start")
     q = _start(problem, current.params, cand["name"]) if q is None else q
-    q2 = (_start(problem, _reset(current.params, given, base_paths), cand["name"])
+    q2 = (_start(problem, reset_to(current.params, given, base_paths), cand["name"])
           if q2 is None else q2)
     if problem.stick_slip:  # the cost at a start is a poor guide: fit from both
         starts = [q, q2]
@@ -120,14 +120,6 @@ def _trial(problem: Problem, current: FitResult, given: JointParams, base_paths:
     cand["trial_nmse"] = res.nmse["mean"]
     cand["relative_improvement"] = rel
     return res.cost, cand, res
-
-
-def _reset(p: JointParams, given: JointParams, paths: list[str]) -> JointParams:
-    """``p`` with the parameters at ``paths`` back at their values in ``given``."""
-    try:
-        return set_values(p, {path: get_value(given, path) for path in paths})
-    except ValueError:
-        return p
 
 
 def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
@@ -148,7 +140,7 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
     """
     params = given
     candidates = rank_candidates(problem, current.params, params, newton,
-                                 _reset(current.params, params, base_paths))
+                                 reset_to(current.params, params, base_paths))
     if not candidates:
         return None, "every testable effect is already in the model", candidates
     trials = []
