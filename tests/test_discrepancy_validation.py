@@ -82,3 +82,22 @@ def test_tuned_validation_is_another_realization() -> None:
         train, val = cases.records(c, cases.truth_for(c), 1.0)
         a, b = np.asarray(train.motor_angle), np.asarray(val.motor_angle)
         assert np.max(np.abs(a - b)) > 0.05 * np.ptp(a), c.name
+
+
+def test_effect_size_is_what_the_base_model_lacks() -> None:
+    """Stiction's switch alone changes no record where Stribeck friction is on (the kernel
+    holds a stuck joint at the breakaway with either); the base model also lacks the
+    breakaway excess, and the effect size measures that."""
+    case = next(c for c in holdout.holdout_cases(134)
+                if c.preset == "wave-drive-50" and c.hidden == "stiction")
+    truth = preset(case.preset)
+    assert "stribeck_friction" in truth.effects
+    runs = [Simulator(q, sensors=False).run(case.command, 2.0, seed=1)
+            for q in (truth, truth.without("stiction"), holdout.hidden_off(truth, "stiction"))]
+    np.testing.assert_array_equal(runs[0].motor_angle, runs[1].motor_angle)
+    assert np.max(np.abs(np.asarray(runs[0].motor_angle) - runs[2].motor_angle)) > 0.1
+    base = holdout.base_model(case, truth)
+    assert base.friction.output.breakaway == base.friction.output.coulomb
+    train, _ = holdout.records(case, truth)
+    size, noise = holdout.effect_size(case, truth, train)
+    assert size > holdout.PRESENT * noise  # was 0: "not present"
