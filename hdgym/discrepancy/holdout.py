@@ -255,9 +255,10 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     the hidden effect (as the base model lacks it: :func:`hidden_off`; the switch alone
     left stiction "not present" on every preset, all of which have Stribeck friction, while
     the base model also lacked the breakaway excess: development seed 134, wave-drive-50 /
-    stiction / sine:0.411:0.5, where naming stiction cut the NMSE by 70 %); the change of the comparison channels is an NMSE,
-    percent, mean over channels, against the measured record's variance, beside the
-    record's measurement-noise NMSE (:func:`.noise.noise_nmse`).
+    stiction / sine:0.411:0.5, where naming stiction cut the NMSE by 70 %); the change of
+    the comparison channels is an NMSE, percent, mean over channels, against the measured
+    record's variance, beside the record's measurement-noise NMSE
+    (:func:`.noise.noise_nmse`).
     """
     from . import residuals as R
     from .problem import Problem
