@@ -101,3 +101,14 @@ def test_effect_size_is_what_the_base_model_lacks() -> None:
     train, _ = holdout.records(case, truth)
     size, noise = holdout.effect_size(case, truth, train)
     assert size > holdout.PRESENT * noise  # was 0: "not present"
+
+
+def test_blind_base_is_the_issue_command() -> None:
+    """A blind case's base model is what ``hdgym diagnose --preset P --without E`` hands the
+    workflow: the preset with the switch alone off (so stiction beside Stribeck friction
+    hides nothing there, and its effect size says so)."""
+    case = next(c for c in holdout.BLIND if c.hidden == "stiction")
+    truth = preset(case.preset)
+    assert holdout.base_model(case, truth) == truth.without("stiction")
+    train, _ = holdout.records(case, truth)
+    assert holdout.effect_size(case, truth, train)[0] == 0.0

@@ -61,7 +61,8 @@ class Blind:
     """One blind case: preset, hidden effect (None: nothing hidden), command, output locked.
 
     ``off``: the base model's fitted parameters are off nominal by up to this share (0: the
-    preset's values, as ``hdgym diagnose --preset P --without E``).
+    preset's values with the effect's switch alone off, as ``hdgym diagnose --preset P
+    --without E``; otherwise its parameters are neutral too, :func:`hidden_off`).
     ``load``: constant external load torque, N m.
     ``validation``: the validation record's command (None: ``command`` again, as issue 14
     defines the blind records; see :func:`records`).
@@ -191,10 +192,12 @@ def holdout_cases(seed: int = HOLDOUT_SEED) -> list[Blind]:
     return out
 
 
-def hidden_off(truth: JointParams, hidden: str) -> JointParams:
-    """``truth`` with the effect ``hidden`` switched off and its parameters neutral: what a
-    case's base model lacks (before its offsets, :func:`base_model`), and what its effect
-    size is measured against (:func:`effect_size`).
+def hidden_off(truth: JointParams, hidden: str, neutral: bool = True) -> JointParams:
+    """``truth`` with the effect ``hidden`` switched off and (``neutral``) its parameters
+    neutral: what a case's base model lacks (before its offsets, :func:`base_model`), and
+    what its effect size is measured against (:func:`effect_size`). Without ``neutral``,
+    the switch alone, as ``hdgym diagnose --without`` hands the workflow the preset (the
+    blind cases, which issue 14 defines by that command).
 
     The switch alone can hide less than the effect: the kernel holds a stuck joint at the
     breakaway torque when stiction *or* Stribeck friction is on (eq. 7), so on a preset with
@@ -203,18 +206,20 @@ def hidden_off(truth: JointParams, hidden: str) -> JointParams:
     (the Coulomb friction's takes the friction ripple with it, the tanh hysteresis's the
     startup torque's growth with the load history).
     """
-    return REGISTRY[hidden].neutral(truth.without(hidden))
+    off = truth.without(hidden)
+    return REGISTRY[hidden].neutral(off) if neutral else off
 
 
 def base_model(case: Blind, truth: JointParams) -> JointParams:
-    """The preset with the hidden effect off (and neutral), the fitted parameters off nominal.
+    """The preset with the hidden effect off (:func:`hidden_off`: neutral too, except on the
+    blind cases), the fitted parameters off nominal.
 
     Every parameter the base fit adjusts is scaled by ``1 +- U(0.4 off, off)`` (random sign,
     seeded by the case).
     """
     p = truth
-    if case.hidden:
-        p = hidden_off(truth, case.hidden)
+    if case.hidden:  # the blind cases (off 0) as the issue's command: the switch alone
+        p = hidden_off(truth, case.hidden, neutral=bool(case.off))
     if not case.off:
         return p
     s = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=1.0, locked=case.locked)
@@ -267,7 +272,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     if case.hidden is None:
         return 0.0, prob.noise["mean"]
     runs = []
-    for p in (truth, hidden_off(truth, case.hidden)):
+    for p in (truth, hidden_off(truth, case.hidden, neutral=bool(case.off))):
         rec = Simulator(p, locked_output=case.locked, sensors=False).run(
             case.command, DURATION, seed=1, load_torque=case.load)
         raw = R.Raw(np.asarray(rec.motor_angle), None if case.locked else rec.output_angle,
