@@ -210,6 +210,13 @@ def hidden_off(truth: JointParams, hidden: str, neutral: bool = True) -> JointPa
     return REGISTRY[hidden].neutral(off) if neutral else off
 
 
+def unperturbed_base(case: Blind, truth: JointParams) -> JointParams:
+    """A case's base model before its offsets: :func:`hidden_off`, the switch alone on the
+    blind cases (off 0, as the issue's command), with its parameters neutral otherwise."""
+    return truth if case.hidden is None else hidden_off(truth, case.hidden,
+                                                        neutral=bool(case.off))
+
+
 def base_model(case: Blind, truth: JointParams) -> JointParams:
     """The preset with the hidden effect off (:func:`hidden_off`: neutral too, except on the
     blind cases), the fitted parameters off nominal.
@@ -217,9 +224,7 @@ def base_model(case: Blind, truth: JointParams) -> JointParams:
     Every parameter the base fit adjusts is scaled by ``1 +- U(0.4 off, off)`` (random sign,
     seeded by the case).
     """
-    p = truth
-    if case.hidden:  # the blind cases (off 0) as the issue's command: the switch alone
-        p = hidden_off(truth, case.hidden, neutral=bool(case.off))
+    p = unperturbed_base(case, truth)
     if not case.off:
         return p
     s = Scales(torque=10.0, speed=1.0, torsion=1e-3, current=1.0, locked=case.locked)
@@ -257,7 +262,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     """How much the hidden effect changes the training record, and the record's noise.
 
     Both runs of the case's command are simulated without sensor noise, with and without
-    the hidden effect (as the base model lacks it: :func:`hidden_off`; the switch alone
+    the hidden effect (as the base model lacks it: :func:`unperturbed_base`; the switch alone
     left stiction "not present" on every preset, all of which have Stribeck friction, while
     the base model also lacked the breakaway excess: development seed 134, wave-drive-50 /
     stiction / sine:0.411:0.5, where naming stiction cut the NMSE by 70 %); the change of
@@ -272,7 +277,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record) -> tuple[float, 
     if case.hidden is None:
         return 0.0, prob.noise["mean"]
     runs = []
-    for p in (truth, hidden_off(truth, case.hidden, neutral=bool(case.off))):
+    for p in (truth, unperturbed_base(case, truth)):
         rec = Simulator(p, locked_output=case.locked, sensors=False).run(
             case.command, DURATION, seed=1, load_torque=case.load)
         raw = R.Raw(np.asarray(rec.motor_angle), None if case.locked else rec.output_angle,
