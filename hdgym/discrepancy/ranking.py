@@ -169,9 +169,7 @@ def rank_candidates(problem: Problem, current: JointParams,
             pass
         if reset is not None:
             try:
-                q_reset, *forms_reset = _form_starts(problem, reset, name)
-                forms += forms_reset  # (every form from there too: a knee the linear
-                # stiffness bent around is found from the given stiffness, not from the bent one)
+                q_reset = _start(problem, reset, name)
                 on2 = _stack(problem, problem.residuals(q_reset))
                 sens = max(sens, 1.0 - float(on2 @ on2) / max(float(r0 @ r0), 1e-300))
             except (SimulationError, ValueError):
