@@ -92,6 +92,30 @@ def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     assert prob.compare == "spring" and not stuck
 
 
+def test_the_curve_is_unexplained_only_where_a_missing_effect_explains_most_of_it():
+    """A spring curve above its noise reads "unexplained" when a missing effect explains at
+    least CURVE_SHARE of it in a linearized refit; a smaller share is what a spring term
+    takes up of a base model some per cent off (development seed 182: 28 % and 17 % where
+    no hardening was hidden)."""
+    from hdgym.discrepancy.floor import CURVE_SHARE, curve_unexplained
+    from hdgym.discrepancy.workflow import MIN_SCORE
+    from hdgym.params import preset
+    from hdgym.record import Record
+    from hdgym.sim import Simulator
+
+    truth = preset("seyfferth-rh32")
+    run = Simulator(truth, locked_output=True).run("sine:2.0:1", 2.0, seed=1)
+    rec = Record(dict(run.columns), dict(run.meta), "locked sine")
+    given = REGISTRY["nonlinear_stiffness"].neutral(truth.without("nonlinear_stiffness"))
+    prob = Problem(rec, given, segment=0.5)
+    prob.set_compare("spring")
+    most = [{"name": "nonlinear_stiffness", "score": 0.97}]
+    part = [{"name": "nonlinear_stiffness", "score": 0.5 * CURVE_SHARE}]
+    assert MIN_SCORE < 0.5 * CURVE_SHARE
+    assert list(curve_unexplained(prob, given, most, MIN_SCORE, 3.0)) == ["spring:motor_angle"]
+    assert curve_unexplained(prob, given, part, MIN_SCORE, 3.0) == {}
+
+
 def test_report_without_a_floor_does_not_print_none():
     """An inverse comparison (a closed-loop real record) has no floor: the report's NMSE
     line leaves the floor out instead of printing "None %"; with a floor it names it."""
