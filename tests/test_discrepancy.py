@@ -428,6 +428,25 @@ def test_three_outcomes_and_the_next_experiment():
     assert _outcome([], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == "nothing missing"
 
 
+def test_a_candidate_that_explains_part_of_the_residual_is_not_nothing_missing():
+    """A candidate whose polish cut the cost against the converged base model and carried
+    over to the validation record (``partial_cut``), yet fell short of being named, turns a
+    resolved residual into "unexplained", with its experiment next."""
+    from hdgym.discrepancy.outcome import RESOLVED, partial_evidence
+    from hdgym.discrepancy.outcome import outcome_of as _outcome
+
+    base = cases.case_joint()
+    cands = [{"name": "stribeck_friction", "partial_cut": 0.185}, {"name": "stiction"}]
+    why = partial_evidence(cands)
+    assert list(why) == ["candidate:stribeck_friction"] and "18.5 %" in why[
+        "candidate:stribeck_friction"]
+    out, nxt = _outcome([], 0.5 * RESOLVED, 0.001, cands, {}, base, why)
+    assert out == "unexplained" and nxt[0] == "hdgym experiment current_sine"
+    # without that evidence the same residual is nothing missing
+    assert partial_evidence([{"name": "stiction"}]) == {}
+    assert _outcome([], 0.5 * RESOLVED, 0.001, cands, {}, base, {})[0] == "nothing missing"
+
+
 @pytest.mark.slow
 def test_two_hidden_effects_are_both_found():
     for case in cases.all_cases():

@@ -51,7 +51,14 @@ from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
-from .outcome import NOISE_FACTOR, carries_over, judge, judged_record, noise_hidden
+from .outcome import (
+    NOISE_FACTOR,
+    carries_over,
+    judge,
+    judged_record,
+    noise_hidden,
+    partial_evidence,
+)
 from .parsimony import NESTED, simpler_does_nearly_as_well
 from .paths import get_value, reset_to
 from .problem import DRIFT, HORIZONS, Problem
@@ -192,6 +199,11 @@ def _search(problem: Problem, vprob: Problem | None, current: FitResult, given: 
                                 nfev_polish)
         rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
         if ctrl.cost < current.cost and rel_ctrl < threshold:
+            if vprob is not None and rel_ctrl >= VALIDATION_GAIN:  # partial evidence?
+                v_now = v_now or vprob.nmse(ctrl.params)
+                if carries_over(v_now, vprob.nmse(polished.params), vprob.names,
+                                VALIDATION_GAIN)[0]:
+                    best["partial_cut"] = round(rel_ctrl, 4)
             reasons.append(f"{best['name']} cuts the cost by {100 * rel_ctrl:.1f} % against "
                            f"the base model polished alike (threshold {100 * threshold:.0f} %)")
             continue
@@ -446,7 +458,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         current = refit
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
-        candidates, untestable_why, params, spring_stuck, alone)
+        candidates, untestable_why, params,
+        {**spring_stuck, **({} if steps else partial_evidence(seen + candidates))}, alone)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     return Diagnosis(
