@@ -107,8 +107,8 @@ circle the range lies; the base model cannot make a transmission error that repe
 WG angle. Was a quarter turn (half the line's period); measured on the development seeds
 (14-170), a twentieth reaches 11 free-output sine records that cross 0.056-0.23 turns back and
 forth (23 reversals). The two with a hidden kinematic error, untestable before, now name it
-first (tuttle-joint3 / kinematic_error / sine:0.178:2, seed 170: validation NMSE 222 -> 9.9 %,
-the joint that made it 1.07 %); on the four run with another effect or none hidden
+first (tuttle-joint3 / kinematic_error / sine:0.178:2, seed 170: validation NMSE 187 -> 9.9 %
+on the horizon reported, 96 % of the gap); on the four run with another effect or none hidden
 (stiction, position-dependent friction, none twice) nothing is named falsely."""
 TURNS_OR_REVISITS = Condition(
     "at least two WG revolutions of motion, or a twentieth of a revolution crossed back and "

@@ -69,7 +69,8 @@ def partial_evidence(candidates: list[dict]) -> dict[str, str]:
     it to within :data:`RESOLVED` (development seed 170, hdf40 / stribeck_friction /
     sine:5.63:1: Stribeck friction cut the cost by 18.5 % against the converged base
     model, and 0.142 % read "nothing missing" where the joint that made the record shows
-    0.019 %). On a record that lacks nothing, no effect the model lacks can do that."""
+    0.019 %). It is the evidence a named effect must give (a cut against the converged base
+    that carries over), at the validation gain's bar instead of the naming threshold."""
     out = {}
     for c in candidates:
         if "partial_cut" in c and f"candidate:{c['name']}" not in out:
