@@ -112,8 +112,8 @@ def test_the_curve_is_unexplained_only_where_a_missing_effect_explains_most_of_i
     most = [{"name": "nonlinear_stiffness", "score": 0.97}]
     part = [{"name": "nonlinear_stiffness", "score": 0.5 * CURVE_SHARE}]
     assert MIN_SCORE < 0.5 * CURVE_SHARE
-    assert list(curve_unexplained(prob, given, most, MIN_SCORE, 3.0)) == ["spring:motor_angle"]
-    assert curve_unexplained(prob, given, part, MIN_SCORE, 3.0) == {}
+    assert list(curve_unexplained(prob, given, most, CURVE_SHARE, 3.0)) == ["spring:motor_angle"]
+    assert curve_unexplained(prob, given, part, CURVE_SHARE, 3.0) == {}
 
 
 def test_report_without_a_floor_does_not_print_none():

@@ -37,7 +37,8 @@ FLOOR_SEED = 9173
 """Seed of the sensor noise of the record the model makes for :func:`floor_nmse`."""
 CURVE_SHARE = 0.5
 """Least share of the spring curve's (or the line channels') residual a missing effect must
-explain in a linearized refit for that residual to read "unexplained" (:func:`curve_unexplained`):
+explain in a linearized refit for that residual to read "unexplained" (the ``min_score`` the
+workflow hands :func:`curve_unexplained`):
 a base model some per cent off bends its curve in ways a missing spring term takes up in
 part. Measured on development cases: a knee spring the search missed explained 97 % of it
 (wave-drive-50 / nonlinear_stiffness, locked, seed 170), a cubic spring that was not there
@@ -137,14 +138,14 @@ def curve_unexplained(judged: Problem, p: JointParams, candidates: list[dict], m
     """The spring curve or the line channels left unexplained (``{"<view>:<channel>":
     why}``) when nothing on them was named.
 
-    Only when an effect the curve reveals is missing and explains at least ``min_score``,
-    and at least :data:`CURVE_SHARE`, of it in a linearized refit (``candidates``, best
-    first): a curve above ``factor`` x its
+    Only when an effect the curve reveals is missing and explains at least ``min_score`` of
+    it in a linearized refit (``candidates``, best first; the workflow asks
+    :data:`CURVE_SHARE`): a curve above ``factor`` x its
     noise level (the larger of its bin means' noise and :func:`floor_nmse`) is then not
     "nothing missing". With every such effect in the model what is left is the slack of its
     own parameters. ``judged`` compares on the curve (:meth:`.problem.Problem.set_compare`).
     """
-    if not candidates or candidates[0]["score"] < max(min_score, CURVE_SHARE):
+    if not candidates or candidates[0]["score"] < min_score:
         return {}
     final = judged.nmse(p)
     floor = floor_nmse(judged, p)

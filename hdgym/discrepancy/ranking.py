@@ -297,6 +297,7 @@ def _start_form(problem: Problem, p: JointParams, name: str, form: str | None
     points = [(best_vals, best_size)] + [
         (v, sz) for _, v, sz in sorted(by_shape.values(), key=lambda t: t[0])
         if v is not best_vals]
+    step = math.log(hi_f / lo_f) / (len(grid) - 1)  # one grid step, in log size
     for vals0, size0 in points:
         if not (size0 and vals0 and unit[size0[0].path] > 0):
             continue
@@ -308,7 +309,6 @@ def _start_form(problem: Problem, p: JointParams, name: str, form: str | None
             return cost({**{fp.path: math.exp(logf) * unit[fp.path] for fp in size0},
                          **fixed})
 
-        step = math.log(hi_f / lo_f) / (len(grid) - 1)
         opt = minimize_scalar(along, bounds=(math.log(f0) - step, math.log(f0) + step),
                               method="bounded", options={"maxiter": 12, "xatol": 0.01})
         if opt.fun < best_cost:

@@ -51,6 +51,7 @@ from . import friction_fit as FF
 from . import residuals as R
 from .diagnosis import Diagnosis, Step
 from .fitting import FitResult, fit, rescored
+from .floor import CURVE_SHARE
 from .outcome import (
     NOISE_FACTOR,
     carries_over,
@@ -385,7 +386,7 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
                 else ():  # then the spring curve (locked output) or the line channels
             n_view = SPRING_TRIAL * nfev_trial if view == "spring" else nfev_trial
             found_s, cands_s, on_curve, spring_stuck = search_view(
-                problem, vprob, current, params, nfev_trial, MIN_SCORE,
+                problem, vprob, current, params, nfev_trial, CURVE_SHARE,
                 lambda cur, n=n_view: _search(problem, vprob, cur, params, base_paths,
                                               threshold, n, nfev_polish, ESCALATED_GAIN, True),
                 view)
