@@ -26,7 +26,9 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
     get); ``quick`` runs the blind cases only, with the quick fit settings; ``jobs`` worker
     processes (:func:`.pool.ordered_map`).
     """
+    from .floor import CURVE_SHARE
     from .outcome import CARRY_FACTOR, FLOOR_FACTOR, NOISE_FACTOR, RESOLVED
+    from .workflow import VALIDATION_GAIN
 
     parts = ["", "## Blind and hold-out cases (never used for tuning)", "",
              "Made by `hdgym.discrepancy.holdout` (run here by the same command): full presets "
@@ -38,7 +40,10 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "record's angles (the command, as the issue defines it, allows no more). *Hold-out*: "
              "every effect on two presets drawn with a fixed seed among those whose parameters "
              "give it a size, an excitation drawn from those that can show it, and every fitted "
-             "base parameter off nominal by 2-5 %; the validation record (seed 2) runs the same "
+             "base parameter off nominal by 2-5 % (a case hiding stiction is made with "
+             "Stribeck friction off, `holdout.case_truth`: beside it, stiction is only the "
+             "breakaway excess the base model's own Stribeck friction fits); the validation "
+             "record (seed 2) runs the same "
              "kind of excitation drawn again, seeded by the case (another amplitude, frequency or "
              "cutoff; `holdout.validation_command`). *Effect NMSE*: how much the hidden effect "
              "changes the record (noise-free runs with and without it), beside the record's "
@@ -68,11 +73,19 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              f"records, stays more than {CARRY_FACTOR:g} x what the base model reaches on the "
              "training record alone (`hdgym.discrepancy.outcome.carry_gap`); a validation record "
              "whose channels stand nowhere above their noise does not judge, the training "
-             "record does (`outcome.judged_record`). On a locked output "
+             "record does (`outcome.judged_record`). With nothing named it is *unexplained* "
+             "also when a candidate cut the training cost by at least "
+             f"{100 * VALIDATION_GAIN:g} % against the base model refitted until it converged "
+             "and carried over to the validation record, yet fell short of being named (a "
+             "residual an effect explains part of is not fit slack; "
+             "`hdgym.discrepancy.outcome.partial_evidence`). On a locked output "
              "whose time channels show nothing, the spring curve (motor angle over bins of the "
              "measured torque and its direction, one run; `hdgym.discrepancy.spring`) is searched "
              "for the spring's effects; a case found there reports before and after on the curve "
-             "(*found* says \"(spring curve)\"). The prediction horizon is chosen per record and "
+             "(*found* says \"(spring curve)\"); a curve left above its noise reads "
+             "*unexplained* only when a missing effect explains at least "
+             f"{100 * CURVE_SHARE:g} % of it (`hdgym.discrepancy.floor.CURVE_SHARE`). The "
+             "prediction horizon is chosen per record and "
              "again after each effect added, and other horizons (longer ones on which the model "
              "drifts, the shortest) are searched when nothing is found at it "
              "(`hdgym.discrepancy.problem.Problem.choose_horizon`, "
