@@ -197,7 +197,11 @@ def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParam
     cheapest first. (The cheapest start need not fit best: a cubic truth's spring started
     closer as a knee on the tuned case hysteresis+nonlinear_stiffness, and fitted worse.)"""
     starts = [_start_form(problem, p, name, form) for form in REGISTRY[name].form_names()]
-    return [q for q, _ in sorted(starts, key=lambda s: s[1])]
+    out: list[JointParams] = []
+    for q, _ in sorted(starts, key=lambda s: s[1]):
+        if q not in out:  # (forms can meet: stiction's two where the record has no levels)
+            out.append(q)
+    return out
 
 
 SHAPE_GRID = (0.02, 0.1, 0.4)
