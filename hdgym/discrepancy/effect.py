@@ -22,7 +22,9 @@ class Scales:
         speed: typical output speed, rad/s.
         torsion: typical torsion, output rad.
         current: largest commanded current, A.
-        current_measured: largest measured current, A (0 when not measured).
+        current_measured: the measured current's clip level, A (the largest measured
+            current when nothing clipped; 0 when not measured; see
+            :func:`.record_scales.clipped_current`).
         voltage: largest voltage the amplifier was asked for, V.
         locked: locked-output record.
         inverse: torque-domain (inverse-dynamics) comparison; the compliance,

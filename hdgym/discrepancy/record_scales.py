@@ -14,6 +14,20 @@ from .gear_effects import ke_lines
 from .restarts import REST_PAUSE, pauses
 
 
+def clipped_current(measured: np.ndarray, command: np.ndarray) -> float:
+    """The level the amplifier clips the current at, A, read from a record.
+
+    The largest measured current sits a noise peak above the limit; where the command
+    asks for more than that, the amplifier held the current at its limit, so the median
+    measured magnitude there reads the limit without the noise's bias. Without such
+    samples (nothing clipped) the largest measured current is the best reading.
+    """
+    i = np.abs(np.asarray(measured, dtype=float))
+    peak = float(np.max(i)) if i.size else 0.0
+    asked = np.abs(np.asarray(command, dtype=float)) > peak
+    return float(np.median(i[asked])) if asked.any() else peak
+
+
 class RecordScales:
     """The part of :class:`.problem.Problem` that reads sizes from its record."""
 
@@ -78,8 +92,8 @@ class RecordScales:
         torsion = (float(np.quantile(np.abs(c.torsion), 0.95)) if c.torsion is not None
                    else torque / p.compliance.stiffness)
         torsion = max(torsion, 1e-9)
-        cm = float(np.max(np.abs(self.raw.motor_current))) if self.raw.motor_current is not None \
-            else 0.0
+        cm = (clipped_current(self.raw.motor_current, self.u)
+              if self.raw.motor_current is not None else 0.0)
         i_for_v = self.raw.motor_current if self.raw.motor_current is not None else self.u
         volt = float(np.max(np.abs(p.motor.resistance * i_for_v
                                    + p.motor.back_emf_constant * c.speed)))
