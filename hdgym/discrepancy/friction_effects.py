@@ -189,11 +189,9 @@ def _levels(p: JointParams, s: Scales, side: str) -> tuple[float, float] | None:
     """
     got = {name: (st, run) for name, st, run in s.static}
     if p.friction.placement == "mesh" and not s.inverse:
-        if side == "input" or "input" not in got:
-            return None
-        fi = p.friction.input
-        st, run = got["input"]
-        return (max(st - fi.breakaway, 0.0) * p.ratio, max(run - fi.coulomb, 0.0) * p.ratio)
+        # the motor-side reading is a lumped one, motor-referred
+        st, run = got.get("input", (0.0, 0.0))
+        got = {"lumped": (st * p.ratio, run * p.ratio)} if "input" in got else {}
     if side in got:
         return got[side]
     if side == "output" and "lumped" in got:
