@@ -8,7 +8,8 @@ from hdgym.discrepancy import cases
 from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.discrepancy.problem import Problem
 from hdgym.discrepancy.ranking import rank_candidates
-from hdgym.discrepancy.record_scales import clipped_current
+from hdgym.discrepancy.record_scales import clip_level
+from hdgym.discrepancy.registry import REGISTRY
 from hdgym.params import preset
 from hdgym.sim import Simulator
 
@@ -52,7 +53,7 @@ def test_candidate_is_also_started_from_the_given_base():
     assert amp(given)["sensitivity_explained"] > 0.9
 
 
-def test_current_limit_is_read_from_the_clipped_samples_not_the_noise_peak():
+def test_amplifier_limits_are_read_from_the_clipped_samples_not_the_noise_peak():
     # the largest measured current sits a noise peak above the limit (0.6 % here, 5 % on
     # a smaller drive, enough that switching the limit on explained nothing); where the
     # command asks for more, the median measured current reads the limit itself
@@ -60,8 +61,27 @@ def test_current_limit_is_read_from_the_clipped_samples_not_the_noise_peak():
     limit = truth.amplifier.current_limit
     clipped = Simulator(truth).run("sine:7.8:1", 2.0, seed=3)
     assert np.max(np.abs(clipped.motor_current)) > 1.004 * limit
-    assert abs(clipped_current(clipped.motor_current, clipped.current_command) / limit - 1) < 1e-3
-    # nothing clipped: the largest measured current is the reading
+    level, seen = clip_level(clipped.motor_current, clipped.current_command)
+    assert seen and abs(level / limit - 1) < 1e-3
+    # (it gave 31 V of its 40 V)
+    assert Problem(clipped, truth).scales.voltage_unreached
+    # nothing clipped: the largest measured current
     free = Simulator(truth).run("sine:1.0:1", 2.0, seed=3)
-    assert clipped_current(free.motor_current, free.current_command) == np.max(
-        np.abs(free.motor_current))
+    level, seen = clip_level(free.motor_current, free.current_command)
+    assert not seen and level == np.max(np.abs(free.motor_current))
+    scales = Problem(free, truth).scales
+    assert scales.voltage_unreached
+    on = REGISTRY["amplifier_saturation"].switch_on(truth, scales)
+    assert on.amplifier.voltage_limit == 3 * scales.voltage
+
+
+def test_a_voltage_held_current_reads_the_voltage_limit_not_the_current_limit():
+    # a run-up the voltage limit holds: the current sits far below its limit, so the
+    # current's clip level comes from the samples before the speed rose, and the voltage
+    # (R i + k_b w) sits at its limit
+    truth = preset("hduc20")
+    rec = Simulator(truth).run("step:10.6", 2.0, seed=3)
+    s = Problem(rec, truth).scales
+    assert abs(s.current_measured / truth.amplifier.current_limit - 1) < 0.02
+    assert not s.voltage_unreached
+    assert abs(s.voltage / truth.amplifier.voltage_limit - 1) < 0.02

@@ -24,8 +24,10 @@ class Scales:
         current: largest commanded current, A.
         current_measured: the measured current's clip level, A (the largest measured
             current when nothing clipped; 0 when not measured; see
-            :func:`.record_scales.clipped_current`).
-        voltage: largest voltage the amplifier was asked for, V.
+            :func:`.record_scales.clip_level`).
+        voltage: the voltage's clip level where the measured current shows one, else the
+            largest voltage the amplifier gave (or, current not measured, was asked for), V.
+        voltage_unreached: the measured current shows the voltage limit never held it.
         locked: locked-output record.
         inverse: torque-domain (inverse-dynamics) comparison; the compliance,
             hysteresis, kinematic-error and amplifier effects are not testable.
@@ -68,6 +70,7 @@ class Scales:
     current: float
     current_measured: float = 0.0
     voltage: float = 0.0
+    voltage_unreached: bool = False
     locked: bool = False
     inverse: bool = False
     transmission_error: float = 0.0

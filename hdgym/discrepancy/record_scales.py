@@ -13,19 +13,25 @@ from .friction_effects import RIPPLE_ORDERS
 from .gear_effects import ke_lines
 from .restarts import REST_PAUSE, pauses
 
+CLIP_BAND = 0.9
+"""Samples whose measured magnitude is within this share of the largest read a clip level
+(:func:`clip_level`); below it the other limit (or the load) held the signal."""
 
-def clipped_current(measured: np.ndarray, command: np.ndarray) -> float:
-    """The level the amplifier clips the current at, A, read from a record.
 
-    The largest measured current sits a noise peak above the limit; where the command
-    asks for more than that, the amplifier held the current at its limit, so the median
-    measured magnitude there reads the limit without the noise's bias. Without such
-    samples (nothing clipped) the largest measured current is the best reading.
+def clip_level(measured: np.ndarray, asked: np.ndarray) -> tuple[float, bool]:
+    """The level an amplifier limit clipped a signal at, and whether it clipped at all.
+
+    The largest measured magnitude sits a noise peak above the limit; where the amplifier
+    was asked for more than that and the measured magnitude stayed near the top (within
+    :data:`CLIP_BAND`; lower, the other limit held it), the signal sat at its limit, so the
+    median measured magnitude there reads the limit without the noise's bias. Nothing
+    asked for beyond the peak: nothing clipped, and the largest measured magnitude is
+    returned (a bound the record never reached). Units are the signals'.
     """
-    i = np.abs(np.asarray(measured, dtype=float))
-    peak = float(np.max(i)) if i.size else 0.0
-    asked = np.abs(np.asarray(command, dtype=float)) > peak
-    return float(np.median(i[asked])) if asked.any() else peak
+    m = np.abs(np.asarray(measured, dtype=float))
+    peak = float(np.max(m)) if m.size else 0.0
+    held = (np.abs(np.asarray(asked, dtype=float)) > peak) & (m >= CLIP_BAND * peak)
+    return (float(np.median(m[held])), True) if held.any() else (peak, False)
 
 
 class RecordScales:
@@ -92,17 +98,24 @@ class RecordScales:
         torsion = (float(np.quantile(np.abs(c.torsion), 0.95)) if c.torsion is not None
                    else torque / p.compliance.stiffness)
         torsion = max(torsion, 1e-9)
-        cm = (clipped_current(self.raw.motor_current, self.u)
-              if self.raw.motor_current is not None else 0.0)
-        i_for_v = self.raw.motor_current if self.raw.motor_current is not None else self.u
-        volt = float(np.max(np.abs(p.motor.resistance * i_for_v
-                                   + p.motor.back_emf_constant * c.speed)))
+        cm, volt, unreached = 0.0, 0.0, False
+        if self.raw.motor_current is not None:  # the amplifier's limits as the record shows
+            i_m = np.asarray(self.raw.motor_current, dtype=float)
+            cm, _ = clip_level(i_m, self.u)
+            r_m, k_b = p.motor.resistance, p.motor.back_emf_constant
+            volt, reached = clip_level(r_m * i_m + k_b * c.speed,
+                                       r_m * np.clip(self.u, -cm, cm) + k_b * c.speed)
+            unreached = not reached
+        else:
+            volt = float(np.max(np.abs(p.motor.resistance * self.u
+                                       + p.motor.back_emf_constant * c.speed)))
         te = float(np.std(self.measured["transmission_error"])) \
             if "transmission_error" in self.measured else 0.0
         static = tuple((side, *lv) for side, h in c.held.items()
                        if (lv := R.friction_levels(h, self.dt, self.cutoff)) is not None)
         return Scales(torque=torque, speed=speed, torsion=torsion, current=cur,
-                      current_measured=cm, voltage=volt, locked=self.locked,
+                      current_measured=cm, voltage=volt,
+                      voltage_unreached=unreached, locked=self.locked,
                       inverse=self.inverse, transmission_error=te, ke=self._ke_guess(),
                       ripple=self._ripple_guess(), static=static, **self._facts(cur))
 
