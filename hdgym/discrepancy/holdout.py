@@ -144,8 +144,8 @@ PAGE_DEVELOPMENT_SEEDS = (206,)
 FRESH_SEED = 218
 """Seed of the hold-out set that judges the workflow: drawn on 2026-11-27 after seed 206's
 page and the changes made on the amplifier cases of the development seeds (the limits read
-as clip levels, a voltage limit never reached started at its range's top), never run
-before its first page."""
+as clip levels, a voltage limit never reached started at its range's top) and on their
+viscous-friction steps (:data:`.effect.BAND_TIME`), never run before its first page."""
 
 
 def validation_command(kind: str, imax: float, seed: int, training: str) -> str:
