@@ -153,8 +153,9 @@ def _amp_on(p, s):
     starts at its range's top: at the largest voltage given it would clip any record that
     asks for more (development seed 206, tuttle-joint2 / amplifier_saturation /
     sine:5.85:2: 26 V given, the true limit 40 V; the validation record asks for 32 V and
-    kept 37 % of its gap at the largest voltage given, none from the top; on the ten
-    development sine cases of seeds 98-206, 9 hits against 10)."""
+    kept 37 % of its gap at the largest voltage given, none from the top; of the ten
+    development sine cases of seeds 98-206, 9 hits at the largest voltage given, 10 from
+    the top)."""
     cur = s.current_measured if s.current_measured > 0 else s.current
     v = max(s.voltage, 1e-3)
     return {"amplifier.current_limit": max(cur, 1e-6),

@@ -1,5 +1,6 @@
-"""Sizes read from a record: friction held at rest, typical torque/speed/torsion, and the
-order-line guesses that start kinematic error and friction ripple (:class:`.effect.Scales`)."""
+"""Sizes read from a record: friction held at rest, typical torque/speed/torsion, the
+amplifier's clip levels, and the order-line guesses that start kinematic error and friction
+ripple (:class:`.effect.Scales`)."""
 
 from __future__ import annotations
 
