@@ -1,4 +1,5 @@
-"""The ranking's Gauss-Newton start for order-line candidates (escalated horizons)."""
+"""Where the ranking starts its candidates: a Gauss-Newton step for order lines (escalated
+horizons), the given base values, and the amplifier limits read as the record's clip levels."""
 
 from __future__ import annotations
 

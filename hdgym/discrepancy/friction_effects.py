@@ -190,8 +190,8 @@ def _levels(p: JointParams, s: Scales, side: str) -> tuple[float, float] | None:
     got = {name: (st, run) for name, st, run in s.static}
     if p.friction.placement == "mesh" and not s.inverse:
         # the motor-side reading is a lumped one, motor-referred
-        st, run = got.get("input", (0.0, 0.0))
-        got = {"lumped": (st * p.ratio, run * p.ratio)} if "input" in got else {}
+        motor = got.get("input")
+        got = {} if motor is None else {"lumped": (motor[0] * p.ratio, motor[1] * p.ratio)}
     if side in got:
         return got[side]
     if side == "output" and "lumped" in got:

@@ -99,7 +99,7 @@ class RecordScales:
         torsion = (float(np.quantile(np.abs(c.torsion), 0.95)) if c.torsion is not None
                    else torque / p.compliance.stiffness)
         torsion = max(torsion, 1e-9)
-        cm, volt, unreached = 0.0, 0.0, False
+        cm, unreached = 0.0, False
         if self.raw.motor_current is not None:  # the amplifier's limits as the record shows
             i_m = np.asarray(self.raw.motor_current, dtype=float)
             cm, _ = clip_level(i_m, self.u)
