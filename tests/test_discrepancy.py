@@ -268,6 +268,81 @@ def test_central_differences_cross_a_staircase_cost():
         assert central.values[path] == pytest.approx(get_value(truth, path), rel=0.005)
 
 
+class _CountStairs(_ParamStairs):
+    """A stand-in problem whose model reads its parameters on a coarse encoder: floored to
+    2 % steps when ``quantized``, else at the steps' mean (as
+    :func:`hdgym.discrepancy.residuals.mean_reading`). A central step of the fit spans less
+    than one stair."""
+
+    def __init__(self, truth):
+        super().__init__(truth)
+        self.quantized = True
+
+    def vector(self, p, decimate=1):
+        out = []
+        for path in self.paths:
+            rel = get_value(p, path) / get_value(self.truth, path) - 1
+            rel = math.floor(rel * 50) / 50 if self.quantized else rel - 0.01
+            out.append(np.sin(7 * self.t * (1 + rel)) - np.sin(7 * self.t))
+        return np.concatenate(out) / 20
+
+
+class _FlooredOnly(_CountStairs):
+    """The same model with its readings always floored (no mean-reading pass)."""
+
+    @property
+    def quantized(self):
+        return True
+
+    @quantized.setter
+    def quantized(self, value):
+        pass
+
+
+def test_central_fit_crosses_encoder_stairs_on_the_mean_reading():
+    from hdgym.discrepancy.effect import FitParam
+    from hdgym.discrepancy.fitting import fit
+    from hdgym.params import preset
+
+    truth = preset("tuttle-joint3")
+    p = set_values(truth, {"motor.inertia": 1.03 * truth.motor.inertia,
+                           "compliance.stiffness": 0.97 * truth.compliance.stiffness})
+    fps = [FitParam(path, 0.5 * get_value(truth, path), 2.0 * get_value(truth, path))
+           for path in _CountStairs.paths]
+    stuck = fit(_FlooredOnly(truth), p, fps, max_nfev=20, central=True)
+    prob = _CountStairs(truth)
+    both = fit(prob, p, fps, max_nfev=20, central=True)
+    assert stuck.nmse["mean"] > 0.1  # every central step lands on the same stair
+    assert both.nmse["mean"] < 1e-9
+    for path in _CountStairs.paths:
+        value = get_value(truth, path)
+        assert both.values[path] == pytest.approx(value, abs=0.02 * value)
+    assert prob.quantized  # the fit hands the problem back as it found it
+
+
+def test_readings_restore_the_problem_after_an_error():
+    from hdgym.discrepancy.fitting import readings
+    from hdgym.params import preset
+
+    prob = _CountStairs(preset("tuttle-joint3"))
+    with pytest.raises(RuntimeError), readings(prob, False):
+        assert not prob.quantized
+        raise RuntimeError
+    assert prob.quantized
+
+
+def test_mean_reading_is_the_floored_reading_averaged_over_a_count():
+    from hdgym.discrepancy.residuals import mean_reading, quantize
+
+    counts = 4096.0
+    step = 2 * np.pi / counts
+    angle = np.array([0.3, -1.7, 12.0])
+    offsets = (np.arange(1000) + 0.5) / 1000 * step
+    avg = np.mean([quantize(angle + o, counts) for o in offsets], axis=0)
+    assert mean_reading(angle + 0.5 * step, counts) == pytest.approx(avg, abs=1e-3 * step)
+    assert np.array_equal(mean_reading(angle, None), angle)
+
+
 def test_ke_lines_follow_the_simulator_split():
     from hdgym.discrepancy.gear_effects import ke_lines
     from hdgym.params import preset

@@ -107,6 +107,9 @@ class Problem(Restarts, InverseComparison, RecordScales):
             sensor, at the measured held torque where the model can hold it), so
             sticking and breakaway stay the model's own. A locked output restarts
             on the filtered measured motor angle and speed.
+
+    ``quantized`` (default on) floors the model's angles to whole encoder counts, as the
+    record's are; a fit turns it off for its first pass (:func:`.fitting.readings`).
     """
 
     record: Record
@@ -121,6 +124,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
     context: R.Context = field(init=False)
     scales: Scales = field(init=False)
     mask: np.ndarray | None = field(init=False, default=None)
+    quantized: bool = field(init=False, default=True)
 
     def __post_init__(self) -> None:
         rec = self.record
@@ -296,10 +300,15 @@ class Problem(Restarts, InverseComparison, RecordScales):
         else:
             st = self._shoot(sim, p, x0, seg)
         mc, oc = self.counts
-        raw = R.Raw(motor_angle=R.quantize(st[:, L.TH_M], mc),
-                    output_angle=None if self.locked else R.quantize(st[:, L.TH_O], oc),
+        raw = R.Raw(motor_angle=self._read(st[:, L.TH_M], mc),
+                    output_angle=None if self.locked else self._read(st[:, L.TH_O], oc),
                     output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
         return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
+
+    def _read(self, angle: np.ndarray, counts: float) -> np.ndarray:
+        """The model's angle as its encoder reads it: floored to whole counts, or with
+        :attr:`quantized` off their mean (:func:`.residuals.mean_reading`)."""
+        return R.quantize(angle, counts) if self.quantized else R.mean_reading(angle, counts)
 
     def _shoot(self, sim: Simulator, p: JointParams, x0: np.ndarray, seg: int) -> np.ndarray:
         """The model's states over the record run from ``x0`` in segments of ``seg`` samples
@@ -357,7 +366,7 @@ class Problem(Restarts, InverseComparison, RecordScales):
                 x = shifted(part[b - a], row, ke_on, self.ratio,
                             *self._motor_drift(part[: b - a + 1], a))
         mc, oc = self.counts
-        return O.channel_lines(R.quantize(th, mc), R.quantize(out, oc), self.ratio, self.dt,
+        return O.channel_lines(self._read(th, mc), self._read(out, oc), self.ratio, self.dt,
                                self.cutoff, wins, self.names)
 
     def choose_horizon(self, p: JointParams, horizons: tuple[float, ...] = HORIZONS) -> float:

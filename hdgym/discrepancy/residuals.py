@@ -65,6 +65,16 @@ def quantize(angle: np.ndarray, counts: float | None) -> np.ndarray:
     return np.floor(angle / step) * step
 
 
+def mean_reading(angle: np.ndarray, counts: float | None) -> np.ndarray:
+    """The mean of :func:`quantize` over a count's worth of angle: ``angle`` less half a count.
+
+    A continuous stand-in for the floored reading, so a model's prediction moves smoothly
+    with its parameters (:attr:`.problem.Problem.quantized`)."""
+    if not counts:
+        return angle
+    return angle - math.pi / counts
+
+
 def nmse(y_hat: np.ndarray, y: np.ndarray) -> float:
     """Seed-002 NMSE in percent: ``100/(n var(y)) sum (y_hat - y)^2``."""
     y = np.asarray(y, dtype=float)
