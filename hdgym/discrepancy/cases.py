@@ -400,7 +400,11 @@ def main(argv: list[str] | None = None) -> int:
         "polish and the base model refitted alike that it is judged against, the settled base "
         "model, the named model at the end) takes central differences "
         "(`hdgym.discrepancy.fitting.CENTRAL_STEP`): stick-slip and encoder counts make the "
-        "cost a fine staircase on which forward differences stop short of the optimum.",
+        "cost a fine staircase on which forward differences stop short of the optimum. "
+        "Each such fit runs first with the model's angles at the encoders' mean reading "
+        "(half a count below the exact angle, `hdgym.discrepancy.residuals.mean_reading`), "
+        "a cost without the counts' stairs, and then from there with them floored to whole "
+        "counts as the record's are (`hdgym.discrepancy.fitting.fit`).",
         "- Friction candidates start on each friction side alone as well as on both "
         "together (motor-side friction acts before the spring, output-side friction loads "
         "it: wave-drive-50's motor-side viscous friction was missed with both sides moved "
