@@ -249,16 +249,24 @@ class _ParamStairs:
         return {"x": v, "mean": v}
 
 
-def test_central_differences_cross_a_staircase_cost():
+def _stairs_start(off: float):
+    """tuttle-joint3, a start with its motor inertia ``off`` above and its stiffness ``off``
+    below, and the stand-ins' two parameters to fit (half to twice the truth)."""
     from hdgym.discrepancy.effect import FitParam
-    from hdgym.discrepancy.fitting import fit
     from hdgym.params import preset
 
     truth = preset("tuttle-joint3")
-    p = set_values(truth, {"motor.inertia": 1.04 * truth.motor.inertia,
-                           "compliance.stiffness": 0.96 * truth.compliance.stiffness})
+    p = set_values(truth, {"motor.inertia": (1 + off) * truth.motor.inertia,
+                           "compliance.stiffness": (1 - off) * truth.compliance.stiffness})
     fps = [FitParam(path, 0.5 * get_value(truth, path), 2.0 * get_value(truth, path))
            for path in _ParamStairs.paths]
+    return truth, p, fps
+
+
+def test_central_differences_cross_a_staircase_cost():
+    from hdgym.discrepancy.fitting import fit
+
+    truth, p, fps = _stairs_start(0.04)
     prob = _ParamStairs(truth)
     fine = fit(prob, p, fps, max_nfev=20)
     central = fit(prob, p, fps, max_nfev=20, central=True)
@@ -274,6 +282,8 @@ class _CountStairs(_ParamStairs):
     :func:`hdgym.discrepancy.residuals.mean_reading`). A central step of the fit spans less
     than one stair."""
 
+    floors_readings = True
+
     def __init__(self, truth):
         super().__init__(truth)
         self.quantized = True
@@ -288,27 +298,16 @@ class _CountStairs(_ParamStairs):
 
 
 class _FlooredOnly(_CountStairs):
-    """The same model with its readings always floored (no mean-reading pass)."""
+    """The same model, declared as one whose readings are not floored, so the fit makes no
+    pass on the mean reading (and its readings stay floored)."""
 
-    @property
-    def quantized(self):
-        return True
-
-    @quantized.setter
-    def quantized(self, value):
-        pass
+    floors_readings = False
 
 
 def test_central_fit_crosses_encoder_stairs_on_the_mean_reading():
-    from hdgym.discrepancy.effect import FitParam
     from hdgym.discrepancy.fitting import fit
-    from hdgym.params import preset
 
-    truth = preset("tuttle-joint3")
-    p = set_values(truth, {"motor.inertia": 1.03 * truth.motor.inertia,
-                           "compliance.stiffness": 0.97 * truth.compliance.stiffness})
-    fps = [FitParam(path, 0.5 * get_value(truth, path), 2.0 * get_value(truth, path))
-           for path in _CountStairs.paths]
+    truth, p, fps = _stairs_start(0.03)
     stuck = fit(_FlooredOnly(truth), p, fps, max_nfev=20, central=True)
     prob = _CountStairs(truth)
     both = fit(prob, p, fps, max_nfev=20, central=True)
@@ -329,6 +328,21 @@ def test_readings_restore_the_problem_after_an_error():
         assert not prob.quantized
         raise RuntimeError
     assert prob.quantized
+
+
+def test_only_a_comparison_of_the_models_angles_gets_the_mean_reading_pass():
+    from hdgym.discrepancy.fitting import readings
+    from hdgym.discrepancy.problem import Problem
+
+    case = cases.Case("stiction", ("stiction",), "breakaway_ramps", 1.0)
+    truth = cases.truth_for(case)
+    train, _ = cases.records(case, truth, 1.0)
+    sim, inv = Problem(train, truth), Problem(train, truth, mode="inverse")
+    assert sim.floors_readings and not inv.floors_readings
+    with readings(sim, False), readings(inv, False):
+        assert not sim.quantized and inv.quantized  # the inverse one has nothing to floor
+        assert sim.nmse(truth)["mean"] != Problem(train, truth).nmse(truth)["mean"]
+    assert sim.quantized
 
 
 def test_mean_reading_is_the_floored_reading_averaged_over_a_count():

@@ -76,12 +76,20 @@ the floored reading after it does not need (the bench's 60 s tuttle-joint3 recor
 to diagnose with 1e-6, 53 s with 1e-3, the same final cost within 1 %)."""
 
 
+def _flooring(problem) -> list:
+    """The comparisons in ``problem`` (a :class:`.problem.Problem` or one made of several,
+    ``parts``) whose model angles are floored to encoder counts
+    (:attr:`.problem.Problem.floors_readings`; not the inverse comparison)."""
+    return [q for q in getattr(problem, "parts", (problem,))
+            if getattr(q, "floors_readings", False)]
+
+
 @contextmanager
 def readings(problem, quantized: bool):
-    """``problem`` (a :class:`.problem.Problem` or one made of several, ``parts``) with its
-    model's encoder readings floored to whole counts or not (:attr:`.problem.Problem.quantized`)
-    for the duration."""
-    parts = [q for q in getattr(problem, "parts", (problem,)) if hasattr(q, "quantized")]
+    """``problem`` with its model's encoder readings floored to whole counts or not
+    (:attr:`.problem.Problem.quantized`) for the duration, where it floors them at all
+    (:func:`_flooring`)."""
+    parts = _flooring(problem)
     before = [q.quantized for q in parts]
     for q in parts:
         q.quantized = quantized
@@ -151,7 +159,8 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     nfev = 0
     # central: first on the encoders' mean reading (a cost without the quantization
     # staircase), then on the floored reading the record is judged on
-    for quantized in ((False, True) if central else (True,)):
+    # (a comparison that never floors the model's angles, the inverse one, has one cost)
+    for quantized in ((False, True) if central and _flooring(problem) else (True,)):
         with readings(problem, quantized), ThreadPoolExecutor(FD_THREADS) as pool:
             sol = least_squares(fun, z, jac="3-point" if central else "2-point",
                                 bounds=bounds, method="trf",

@@ -305,6 +305,12 @@ class Problem(Restarts, InverseComparison, RecordScales):
                     output_torque=st[:, L.TK], motor_current=st[:, L.CUR])
         return R.channels(raw, self.names, self.ratio, self.dt, self.cutoff)
 
+    @property
+    def floors_readings(self) -> bool:
+        """Whether :attr:`quantized` changes this comparison: the model's angles are compared
+        (not the inverse comparison) on encoders with counts."""
+        return not self.inverse and any(self.counts)
+
     def _read(self, angle: np.ndarray, counts: float) -> np.ndarray:
         """The model's angle as its encoder reads it: floored to whole counts, or with
         :attr:`quantized` off their mean (:func:`.residuals.mean_reading`)."""
