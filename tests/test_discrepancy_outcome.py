@@ -59,8 +59,8 @@ def test_a_named_model_is_judged_against_its_own_floor():
 
 def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     from hdgym.discrepancy.fitting import fit
+    from hdgym.discrepancy.search import ESCALATED_GAIN, MIN_SCORE, THRESHOLD, search_round
     from hdgym.discrepancy.spring_search import search_view
-    from hdgym.discrepancy.workflow import ESCALATED_GAIN, MIN_SCORE, THRESHOLD, _search
     from hdgym.params import preset
     from hdgym.record import Record
     from hdgym.sim import Simulator
@@ -87,7 +87,7 @@ def test_the_spring_curve_shows_the_hardening_the_time_channels_hide():
     paths = [f.path for f in fps]
     accepted, _, _, stuck = search_view(
         prob, None, base, given, 10, MIN_SCORE,
-        lambda cur: _search(prob, None, cur, given, paths, THRESHOLD, 10, 20, ESCALATED_GAIN))
+        lambda cur: search_round(prob, None, cur, given, paths, THRESHOLD, 10, 20, ESCALATED_GAIN))
     assert accepted is not None and accepted[0]["name"] == "nonlinear_stiffness"
     assert prob.compare == "spring" and not stuck
 
@@ -98,7 +98,7 @@ def test_the_curve_is_unexplained_only_where_a_missing_effect_explains_most_of_i
     takes up of a base model some per cent off (development seed 182: 28 % and 17 % where
     no hardening was hidden)."""
     from hdgym.discrepancy.floor import CURVE_SHARE, curve_unexplained
-    from hdgym.discrepancy.workflow import MIN_SCORE
+    from hdgym.discrepancy.search import MIN_SCORE
     from hdgym.params import preset
     from hdgym.record import Record
     from hdgym.sim import Simulator

@@ -1,10 +1,10 @@
-"""How a candidate effect is trial-refitted, polished and judged (:func:`.workflow._search`)."""
+"""How a candidate effect is trial-refitted, polished and judged (:func:`.search.search_round`)."""
 
 from __future__ import annotations
 
 import pytest
 
-from hdgym.discrepancy import workflow as W
+from hdgym.discrepancy import search as W
 from hdgym.discrepancy.fitting import FitResult
 from hdgym.params import preset
 
@@ -32,7 +32,7 @@ def test_the_polish_and_its_control_both_converge(monkeypatch, compare):
     cand = {"name": "hysteresis", "score": 0.5, "relative_improvement": 0.9}
     calls = []
     monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
-    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "trial", lambda *a, **k: (trial.cost, cand, trial))
     monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
 
     def converge(problem, q, fps, nfev, **kw):
@@ -41,7 +41,7 @@ def test_the_polish_and_its_control_both_converge(monkeypatch, compare):
 
     monkeypatch.setattr(W, "converge", converge)
     monkeypatch.setattr(W, "fit", lambda *a, **k: pytest.fail("a single fit judged"))
-    accepted, _, _ = W._search(_Problem(compare), None, current, p, [], 0.4, 10, 20)
+    accepted, _, _ = W.search_round(_Problem(compare), None, current, p, [], 0.4, 10, 20)
     assert accepted is not None
     assert [q for q, _, _ in calls] == [trial.params, current.params]
     assert all(n == 20 and kw == {} for _, n, kw in calls)
@@ -51,7 +51,7 @@ def _one_candidate(monkeypatch, cand: dict, trial: FitResult, fit) -> None:
     """The search sees ``cand`` alone, its trial refit gives ``trial`` and fits go to
     ``fit`` (no model parameters)."""
     monkeypatch.setattr(W, "rank_candidates", lambda *a, **k: [cand])
-    monkeypatch.setattr(W, "_trial", lambda *a, **k: (trial.cost, cand, trial))
+    monkeypatch.setattr(W, "trial", lambda *a, **k: (trial.cost, cand, trial))
     monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
     monkeypatch.setattr(W, "fit", fit)
     monkeypatch.setattr(W, "converge", fit)
@@ -76,7 +76,7 @@ def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
         def nmse(self, q):
             return next(vals)
 
-    accepted, why, _ = W._search(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20,
+    accepted, why, _ = W.search_round(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20,
                                  mean_gain=0.8)
     assert accepted is None and "needs 80 %" in why
     assert cand["escalated_cut"] == pytest.approx(0.55)
@@ -95,10 +95,10 @@ def test_a_candidate_is_judged_against_the_base_model_polished_alike(monkeypatch
     slack = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.6}, 0, 0.6)
     _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
         slack if q is p else trial))
-    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    accepted, why, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is None and "polished alike" in why and "16.7 %" in why
     monkeypatch.setattr(W, "converge", lambda problem, q, *a, **k: current if q is p else trial)
-    accepted, _, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    accepted, _, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is not None and accepted[0]["name"] == "stribeck_friction"
 
 
@@ -128,7 +128,7 @@ def test_a_trial_refit_fits_every_form_with_central_differences(monkeypatch, com
     monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
     cand = {"name": "nonlinear_stiffness", "_start": "fit", "_reset_start": "given",
             "_forms": ["knee"]}
-    cost, _, res = W._trial(_Trial(compare), current, p, [], cand, 10)
+    cost, _, res = W.trial(_Trial(compare), current, p, [], cand, 10)
     assert [q for q, _ in calls] == ["fit", "knee"]
     assert all(kw["central"] is True for _, kw in calls)
     assert cost == 0.5 and cand["trial_nmse"] == 0.5
@@ -155,25 +155,25 @@ def test_a_trial_just_short_of_the_threshold_is_judged_after_its_polish(monkeypa
         return polished
 
     _one_candidate(monkeypatch, cand, trial, fit)
-    accepted, _, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    accepted, _, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is not None and accepted[1] is polished
     assert polishes == [trial.params]
     # a polish that gains nothing leaves it short
     _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
         current if q is p else trial))
-    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    accepted, why, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is None and "30.0 %" in why
     # after an effect is named (near = 1): judged on the trial refit, not polished
     cand["relative_improvement"] = 0.3
     polishes.clear()
     _one_candidate(monkeypatch, cand, trial, fit)
-    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20, near=1.0)
+    accepted, why, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20, near=1.0)
     assert accepted is None and not polishes
     # far below the threshold: not polished
     cand["relative_improvement"] = 0.1
     polishes.clear()
     _one_candidate(monkeypatch, cand, trial, fit)
-    accepted, why, _ = W._search(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    accepted, why, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
     assert accepted is None and not polishes
 
 
@@ -199,10 +199,10 @@ def test_the_validation_check_is_against_the_converged_control(monkeypatch):
             v = validation[id(q)]
             return {"x": v, "mean": v}
 
-    accepted, why, _ = W._search(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20)
+    accepted, why, _ = W.search_round(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20)
     assert accepted is None and "0.3 -> 0.29 %" in why
     # a control that gains nothing on the training record leaves the current fit the base
     _one_candidate(monkeypatch, cand, polished, lambda problem, q, *a, **k: (
         current if q is p else polished))
-    accepted, _, _ = W._search(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20)
+    accepted, _, _ = W.search_round(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20)
     assert accepted is not None

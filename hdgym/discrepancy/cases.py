@@ -51,7 +51,8 @@ from .experiments import PROTOCOLS, command
 from .paths import get_value, set_values
 from .pool import ordered_map
 from .registry import REGISTRY, core_params
-from .workflow import MIN_GAIN, THRESHOLD, VALIDATION_GAIN, diagnose
+from .search import MIN_GAIN, THRESHOLD, VALIDATION_GAIN
+from .workflow import diagnose
 
 BASE_EFFECTS = ("coulomb_friction", "viscous_friction")
 """Effects every case joint has (the ones a base model assumes)."""
@@ -300,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Adding rule: relative cost reduction >= {100 * THRESHOLD:.0f} %, mean NMSE drop >= "
         f"{MIN_GAIN:g} points, validation NMSE down by >= {100 * VALIDATION_GAIN:.0f} % "
         "(geometric mean of the channels' ratios) and its mean down "
-        "(`hdgym.discrepancy.workflow.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
+        "(`hdgym.discrepancy.search.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
         "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
         "preferred to Stribeck friction when it achieves >= 75 % of its improvement "
         "(`hdgym.discrepancy.parsimony.PARSIMONY`); before an effect is named, a trial refit "
@@ -339,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym.discrepancy.problem.Problem.choose_horizon`), and chosen again (never "
         "longer) with the model each time an effect is added. When the base model shows "
         "nothing at the chosen horizon, other horizons are searched too "
-        "(`hdgym.discrepancy.workflow._escalate`): the two shortest longer ones on which it "
+        "(`hdgym.discrepancy.search.escalate`): the two shortest longer ones on which it "
         "drifts (NMSE above 1.5 x its NMSE at the chosen one, and by more than 3 x the "
         "measurement-noise NMSE; an effect that acts over longer stretches than the horizon, "
         "a friction ripple once per output turn slowly changing the speed, is exactly such a "

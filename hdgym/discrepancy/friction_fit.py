@@ -5,7 +5,7 @@ The features themselves and their comparison are :mod:`.friction_events`. Here:
 one candidate in the ranking (:func:`.ranking.rank_candidates`), :func:`rank_by_features`
 ranks friction candidates by them where the time-domain comparison drifts, and
 :func:`short_of` / :func:`accepts` judge an effect found there on them
-(:func:`.workflow._search`).
+(:func:`.search.search_round`).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ def fit_features(problem, q: JointParams, fps, record: FrictionFeatures,
 FEATURE_GAIN = 0.8
 """Share by which a friction effect must cut the validation record's feature mismatch
 (:func:`compare`, ``total``) to be accepted on the features where the time-domain NMSE
-drifts (:func:`.workflow._escalate`)."""
+drifts (:func:`.search.escalate`)."""
 
 
 LEVELS = ("coulomb", "viscous", "breakaway_excess", "stribeck_velocity")
@@ -173,7 +173,7 @@ def rank_by_features(candidates: list[dict]) -> None:
     """Where the time-domain comparison drifts, a friction candidate scores the larger of
     its time-domain score and the share of the feature mismatch it explains
     (``feature_explained``, :func:`candidate_entry`), and its feature fit is also a trial
-    start (``_feature_trial``, :func:`.workflow._trial`); re-sorts ``candidates`` in place.
+    start (``_feature_trial``, :func:`.search.trial`); re-sorts ``candidates`` in place.
     (At the chosen horizon the feature start is not tried: on the tuned load-dependent
     friction case it let Stribeck friction, not in the truth, pass as a second effect.)"""
     for c in candidates:

@@ -28,7 +28,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
     """
     from .floor import CURVE_SHARE
     from .outcome import CARRY_FACTOR, FLOOR_FACTOR, NOISE_FACTOR, RESOLVED
-    from .workflow import VALIDATION_GAIN
+    from .search import VALIDATION_GAIN
 
     parts = ["", "## Blind and hold-out cases (never used for tuning)", "",
              "Made by `hdgym.discrepancy.holdout` (run here by the same command): full presets "
@@ -89,7 +89,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "again after each effect added, and other horizons (longer ones on which the model "
              "drifts, the shortest) are searched when nothing is found at it "
              "(`hdgym.discrepancy.problem.Problem.choose_horizon`, "
-             "`hdgym.discrepancy.workflow._escalate`). These cases run the workflow's full fit "
+             "`hdgym.discrepancy.search.escalate`). These cases run the workflow's full fit "
              "settings, what `hdgym diagnose` runs (earlier pages ran the quick ones, fewer "
              "least-squares iterations; a single case's verdict can move with the fit's budget). "
              "Hold-out sets: seeds "

@@ -63,7 +63,7 @@ def carry_gap(final: float, alone: float | None, noise: float) -> str | None:
 def partial_evidence(candidates: list[dict]) -> dict[str, str]:
     """What the candidates tried say against *nothing missing*: ``{"candidate:<name>": why}``
     for each whose polish cut the training cost against the base model refitted until it
-    converged (``partial_cut``, :func:`.workflow._search`) by at least the validation gain
+    converged (``partial_cut``, :func:`.search.search_round`) by at least the validation gain
     and carried over to the validation record, yet fell short of naming it. A residual
     that an effect explains a real part of is not fit slack, though the base fit takes
     it to within :data:`RESOLVED` (development seed 170, hdf40 / stribeck_friction /

@@ -119,7 +119,7 @@ def rank_candidates(problem: Problem, current: JointParams,
     by moving the kinematic error and friction; the limits the record shows then raised it
     to 68 %, while from the given values they cut it to 4.7 %). Both starts are kept in the
     entry (``_start``, ``_reset_start``; None where a start failed; ``_forms``: the starts of
-    the candidate's other forms) for the trial refit (:func:`.workflow._trial`). Candidates
+    the candidate's other forms) for the trial refit (:func:`.search.trial`). Candidates
     are ranked by the sensitivity score (the signature score breaks ties and is reported as
     evidence).
     """

@@ -12,7 +12,7 @@ that neither a missing effect nor the record's noise made:
   :func:`converge` refits (central differences) until a round gains less than
   :data:`SETTLE_TOL` of the cost;
 * the same holds of a model with effects named: the polish after each effect
-  (:func:`.workflow._search`) converges from where its trial refit left it (the valley the
+  (:func:`.search.search_round`) converges from where its trial refit left it (the valley the
   base fit moved into to mimic the effect), and the final model's residual is judged
   against its own floor and reported. Before that, :func:`converge_named` refits the final
   model (base and named effects) until it converges, from the given core values too;
@@ -55,7 +55,7 @@ def converge(problem, p: JointParams, fps: list[FitParam], nfev: int,
     :data:`SETTLE_TOL` of it, or after ``rounds`` rounds; the cheapest fit.
 
     Wherever the workflow compares fits refitted until they converge (an effect's polish
-    and its control, :func:`.workflow._search`; :func:`settle`; :func:`converge_named`),
+    and its control, :func:`.search.search_round`; :func:`settle`; :func:`converge_named`),
     both sides are refitted by this, so neither is credited with the other's slack."""
     best = None
     q = p

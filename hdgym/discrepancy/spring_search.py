@@ -6,7 +6,7 @@ measured torque (and its direction) the noise goes and the bend stays. The line 
 of a free-output record (:mod:`.orders`): lines above the time channels' filter cutoff,
 at orders of each run's own WG angle. :func:`search_view` refits the base model on the
 comparison, then ranks and tries the effects it reveals (:attr:`.effect.Effect.compare`)
-with the workflow's own search (:func:`.workflow._search`, passed in).
+with the workflow's own search (:func:`.search.search_round`, passed in).
 """
 
 from __future__ import annotations
