@@ -352,6 +352,11 @@ def main(argv: list[str] | None = None) -> int:
         "(they start at zero amplitude). Locked-output "
         "records restart on the filtered measured motor angle and speed (the output stays "
         "clamped).",
+        "- A search that names nothing and leaves the residual unexplained runs again with "
+        "the two records' roles swapped (`hdgym.discrepancy.workflow.diagnose`): fitted and "
+        "searched on the validation record, each effect checked on the training record at "
+        "the same bars. One run can show an effect the other hardly shows. When that names "
+        "an effect, the case's before and after are NMSE on the training record.",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "
         "of speeds, the torsion, high or transmitted torque). An effect the record cannot "
