@@ -1,5 +1,6 @@
-"""A diagnosis that names nothing and leaves the residual unexplained searches again with its
-two records' roles swapped (:func:`hdgym.discrepancy.workflow.diagnose`)."""
+"""A diagnosis that names nothing and leaves the residual unexplained searches again, with
+every candidate trial-refitted and with its two records' roles swapped
+(:func:`hdgym.discrepancy.workflow.diagnose`)."""
 
 from __future__ import annotations
 
@@ -21,38 +22,51 @@ class _OneWay:
     seconds: float = 0.0
 
 
-def _one_way_stub(monkeypatch, outcomes: dict[str, _OneWay]) -> list[str]:
-    """``workflow._one_way`` answering by the searched record's source; the sources searched."""
+def _one_way_stub(monkeypatch, answers: list[_OneWay]) -> list[tuple]:
+    """``workflow._one_way`` giving ``answers`` in turn; the calls as (searched, checked,
+    the least linearized share for a trial refit)."""
     from hdgym.discrepancy import workflow as W
 
-    calls = []
+    calls, todo = [], list(answers)
 
-    def one_way(record, params, validate, **kw):
-        calls.append(record.source)
-        return outcomes[record.source]
+    def one_way(record, params, validate, min_score=W.MIN_SCORE, **kw):
+        calls.append((record.source, getattr(validate, "source", None), min_score))
+        return todo.pop(0)
 
     monkeypatch.setattr(W, "_one_way", one_way)
     return calls
 
 
-def test_an_unexplained_search_runs_again_with_the_records_swapped(monkeypatch):
-    """Nothing named and the residual unexplained: the validation record is searched and
-    the training record checks; the swapped diagnosis is returned when it names an effect,
-    else the first one with what the other way read."""
+A, B = SimpleNamespace(source="a.csv"), SimpleNamespace(source="b.csv")
+
+
+def test_an_unexplained_search_runs_again_with_every_candidate_then_the_records_swapped(
+        monkeypatch):
+    """Nothing named and the residual unexplained: the same records again with every
+    candidate trial-refitted, then the validation record searched and the training record
+    checking; the first diagnosis that names an effect is returned, else the first one with
+    what the others read."""
+    from hdgym.discrepancy.search import MIN_SCORE
     from hdgym.discrepancy.workflow import diagnose
 
-    a, b = SimpleNamespace(source="a.csv"), SimpleNamespace(source="b.csv")
     named = _OneWay("b.csv", "named", steps=["load_dependent_friction"], conclusion="found it")
-    calls = _one_way_stub(monkeypatch, {"a.csv": _OneWay("a.csv", "unexplained"),
-                                        "b.csv": named})
-    d = diagnose(a, None, b)
-    assert calls == ["a.csv", "b.csv"] and d.source == "b.csv" and d.steps == named.steps
+    calls = _one_way_stub(monkeypatch, [_OneWay("a.csv", "unexplained"),
+                                        _OneWay("a.csv", "unexplained"), named])
+    d = diagnose(A, None, B)
+    assert calls == [("a.csv", "b.csv", MIN_SCORE), ("a.csv", "b.csv", 0.0),
+                     ("b.csv", "a.csv", MIN_SCORE)]
+    assert d.source == "b.csv" and d.steps == named.steps
     assert d.conclusion.endswith("found it") and "roles swapped" in d.conclusion
-    calls = _one_way_stub(monkeypatch, {"a.csv": _OneWay("a.csv", "unexplained"),
-                                        "b.csv": _OneWay("b.csv", "nothing missing")})
-    d = diagnose(a, None, b)
-    assert calls == ["a.csv", "b.csv"] and d.source == "a.csv" and d.outcome == "unexplained"
-    assert d.conclusion.endswith("it reads nothing missing")
+    same = _OneWay("a.csv", "named", steps=["stribeck_friction"], conclusion="found that")
+    calls = _one_way_stub(monkeypatch, [_OneWay("a.csv", "unexplained"), same])
+    d = diagnose(A, None, B)
+    assert len(calls) == 2 and d.steps == same.steps and d.conclusion.endswith("found that")
+    calls = _one_way_stub(monkeypatch, [_OneWay("a.csv", "unexplained", conclusion="first"),
+                                        _OneWay("a.csv", "unexplained"),
+                                        _OneWay("b.csv", "nothing missing")])
+    d = diagnose(A, None, B)
+    assert len(calls) == 3 and d.source == "a.csv" and d.outcome == "unexplained"
+    assert d.conclusion.startswith("first;") and d.conclusion.endswith("reads nothing missing")
 
 
 @pytest.mark.parametrize("first", [
@@ -61,14 +75,12 @@ def test_an_unexplained_search_runs_again_with_the_records_swapped(monkeypatch):
     _OneWay("a.csv", "nothing missing"),
     _OneWay("a.csv", "unexplained", validation=None),  # a blind validation record, set aside
 ])
-def test_the_records_swap_only_when_nothing_was_named_and_the_residual_is_unexplained(
+def test_the_search_runs_again_only_when_nothing_was_named_and_the_residual_is_unexplained(
         monkeypatch, first):
     from hdgym.discrepancy.workflow import diagnose
 
-    calls = _one_way_stub(monkeypatch, {"a.csv": first})
-    assert diagnose(SimpleNamespace(source="a.csv"), None, SimpleNamespace(source="b.csv")) \
-        is first
-    assert calls == ["a.csv"]
-    calls = _one_way_stub(monkeypatch, {"a.csv": _OneWay("a.csv", "unexplained")})
-    assert diagnose(SimpleNamespace(source="a.csv"), None).outcome == "unexplained"
-    assert calls == ["a.csv"]  # no validation record: nothing to swap with
+    calls = _one_way_stub(monkeypatch, [first])
+    assert diagnose(A, None, B) is first and len(calls) == 1
+    calls = _one_way_stub(monkeypatch, [_OneWay("a.csv", "unexplained")])
+    assert diagnose(A, None).outcome == "unexplained"
+    assert len(calls) == 1  # no validation record: no check for a second search

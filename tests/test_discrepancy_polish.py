@@ -206,3 +206,21 @@ def test_the_validation_check_is_against_the_converged_control(monkeypatch):
         current if q is p else polished))
     accepted, _, _ = W.search_round(_Problem("time"), _Val(), current, p, [], 0.4, 10, 20)
     assert accepted is not None
+
+
+def test_a_candidate_below_the_linearized_gate_is_trialled_only_when_asked(monkeypatch):
+    """A candidate whose linearized refit explains less than MIN_SCORE of the residual is
+    not trial-refitted; with ``min_score=0`` (the second search of an unexplained residual,
+    :func:`hdgym.discrepancy.workflow.diagnose`) it is, and judged as any other."""
+    p = preset("tuttle-joint3")
+    current = FitResult(p, {}, {"mean": 1.0}, 0, 1.0)
+    trial = FitResult(preset("tuttle-joint3"), {}, {"mean": 0.1}, 0, 0.1)
+    cand = {"name": "stribeck_friction", "score": 0.5 * W.MIN_SCORE,
+            "relative_improvement": 0.9}
+    _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: (
+        current if q is p else trial))
+    accepted, why, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20)
+    assert accepted is None and "linearized refit" in why
+    accepted, _, _ = W.search_round(_Problem("time"), None, current, p, [], 0.4, 10, 20,
+                                    min_score=0.0)
+    assert accepted is not None and accepted[0]["name"] == "stribeck_friction"

@@ -352,10 +352,12 @@ def main(argv: list[str] | None = None) -> int:
         "(they start at zero amplitude). Locked-output "
         "records restart on the filtered measured motor angle and speed (the output stays "
         "clamped).",
-        "- A search that names nothing and leaves the residual unexplained runs again with "
-        "the two records' roles swapped (`hdgym.discrepancy.workflow.diagnose`): fitted and "
-        "searched on the validation record, each effect checked on the training record at "
-        "the same bars. One run can show an effect the other hardly shows. When that names "
+        "- A search that names nothing and leaves the residual unexplained runs again, at "
+        "the same bars, until one names an effect (`hdgym.discrepancy.workflow.diagnose`): "
+        "with every candidate trial-refitted, not only those a linearized refit credits "
+        "with 3 % of the residual; then with the two records' roles swapped, fitted and "
+        "searched on the validation record and each effect checked on the training record "
+        "(one run can show an effect the other hardly shows). When the swapped search names "
         "an effect, the case's before and after are NMSE on the training record.",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "

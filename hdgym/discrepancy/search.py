@@ -76,11 +76,13 @@ def validation_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | No
 def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                  given: JointParams, base_paths: list[str], threshold: float, nfev_trial: int,
                  nfev_polish: int, mean_gain: float = 0.0, newton: bool = False,
-                 near: float = NEAR) -> tuple[tuple | None, str, list[dict]]:
+                 near: float = NEAR, min_score: float = MIN_SCORE
+                 ) -> tuple[tuple | None, str, list[dict]]:
     """One round: rank the candidates, trial-refit the best, accept the first that passes
     (``mean_gain``: the share by which it must also cut the mean validation NMSE;
     ``newton``: order-line candidates also start from a Gauss-Newton step, :func:`_newton_start`;
-    ``near``: :data:`NEAR`, 1 to judge every candidate on its trial refit).
+    ``near``: :data:`NEAR`, 1 to judge every candidate on its trial refit; ``min_score``:
+    :data:`MIN_SCORE`, the least linearized share for any trial refit).
 
     Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
     relative improvement)`` or None, ``reason`` why nothing passed.
@@ -92,8 +94,8 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
         return None, "every testable effect is already in the model", candidates
     trials = []
     top = candidates[0]["score"]
-    if top < MIN_SCORE:
-        return None, (f"nothing (more) worth adding: no candidate explains {100 * MIN_SCORE:g} "
+    if top < min_score:
+        return None, (f"nothing (more) worth adding: no candidate explains {100 * min_score:g} "
                       f"% of the residual in a linearized refit (best: "
                       f"{candidates[0]['name']}, {100 * top:.1f} %)"), candidates
     for cand in [c for c in candidates[:TOP_K] if c["score"] >= 0.5 * top]:
@@ -177,7 +179,8 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
 
 def escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
              base_paths: list[str], threshold: float, nfev_trial: int, nfev_polish: int,
-             seen: list[dict] | None = None) -> tuple[tuple, list[dict], FitResult] | None:
+             seen: list[dict] | None = None, min_score: float = MIN_SCORE
+             ) -> tuple[tuple, list[dict], FitResult] | None:
     """Search again at other horizons when the base model shows nothing at the chosen one.
 
     The horizon is chosen with the base model (:meth:`.problem.Problem.choose_horizon`),
@@ -199,6 +202,7 @@ def escalate(problem: Problem, vprob: Problem | None, current: FitResult, given:
     parameter buys), and the diagnosis then stays at
     that horizon (before and after are both reported on it). Returns ``(accepted,
     candidates, current at that horizon)`` or None (the horizon is left as it was).
+    ``min_score``: as :func:`search_round`.
     """
     h0 = problem.segment
     base = problem.nmse(current.params)["mean"]
@@ -216,7 +220,7 @@ def escalate(problem: Problem, vprob: Problem | None, current: FitResult, given:
         cur = rescored(problem, current)
         accepted, _, candidates = search_round(problem, vprob, cur, given, base_paths,
                                                threshold, nfev_trial, nfev_polish,
-                                               ESCALATED_GAIN, True)
+                                               ESCALATED_GAIN, True, min_score=min_score)
         if seen is not None:  # ``seen``: every horizon's candidates
             seen.extend(candidates)
         if accepted is not None:
