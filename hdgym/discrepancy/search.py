@@ -80,9 +80,10 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                  ) -> tuple[tuple | None, str, list[dict]]:
     """One round: rank the candidates, trial-refit the best, accept the first that passes
     (``mean_gain``: the share by which it must also cut the mean validation NMSE;
-    ``newton``: order-line candidates also start from a Gauss-Newton step, :func:`_newton_start`;
-    ``near``: :data:`NEAR`, 1 to judge every candidate on its trial refit; ``min_score``:
-    :data:`MIN_SCORE`, the least linearized share for any trial refit).
+    ``newton``: order-line candidates also start from a Gauss-Newton step,
+    :func:`.ranking._newton_start`; ``near``: :data:`NEAR`, 1 to judge every candidate on its
+    trial refit; ``min_score``: :data:`MIN_SCORE`, the least linearized share for any trial
+    refit).
 
     Returns ``(accepted, reason, candidates)``: ``accepted`` is ``(candidate, polished fit,
     relative improvement)`` or None, ``reason`` why nothing passed.

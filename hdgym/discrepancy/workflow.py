@@ -35,8 +35,8 @@ to the validation record: :func:`.outcome.carry_gap`) or *unexplained*; for unex
 residuals and untestable effects the diagnosis names the protocols (``hdgym experiment ...``)
 whose records would decide (:func:`.outcome.judge`; a validation record that shows nothing
 above its noise does not judge, :func:`.outcome.judged_record`, and is set aside before the
-search). A search that names nothing and leaves the residual unexplained runs again with the
-two records' roles swapped (:func:`diagnose`).
+search). A search that names nothing and leaves the residual unexplained runs again with
+every candidate trial-refitted, then with the two records' roles swapped (:func:`diagnose`).
 """
 
 from __future__ import annotations
