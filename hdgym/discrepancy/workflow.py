@@ -107,8 +107,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     *unexplained*, it runs twice more, at the same bars, until one names an effect:
 
     * on the same records with every candidate trial-refitted, not only those that explain
-      :data:`.search.MIN_SCORE` of the residual in a linearized refit (a friction whose
-      effect is a narrow change at each reversal is poorly linearized);
+      :data:`.search.MIN_SCORE` of the residual in a linearized refit (linearized at the
+      registry's guess, the ranking can credit an effect with little of what its full
+      trial refit removes);
     * with the two records' roles swapped: fitted and searched on ``validate``, each effect
       checked on ``record``. A record can show an effect the other hardly shows (a
       load-dependent friction a sine's load barely moves on one run and plainly on the
