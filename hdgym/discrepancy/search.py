@@ -69,10 +69,6 @@ def trial(problem: Problem, current: FitResult, given: JointParams, base_paths: 
     return res.cost, cand, res
 
 
-def validation_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
-    return None if vp is None else vp.nmse(p)
-
-
 def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                  given: JointParams, base_paths: list[str], threshold: float, nfev_trial: int,
                  nfev_polish: int, mean_gain: float = 0.0, newton: bool = False,

@@ -69,7 +69,6 @@ from .search import (
     THRESHOLD,
     escalate,
     search_round,
-    validation_nmse,
 )
 from .settle import converge_named, settle
 from .spring_search import search_view, views
@@ -128,7 +127,9 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     Args:
         record: the measured run.
         params: the base model (its ``effects`` are the ones assumed present).
-        validate: a second record of the same drive to report NMSE on.
+        validate: a second record of the same drive: NMSE is reported on it, every effect
+            named must carry over to it, and it is searched in turn when the search on
+            ``record`` leaves the residual unexplained.
         mode: ``simulate``, ``inverse`` or ``auto`` (see :class:`.fitting.Problem`).
         threshold: least relative cost reduction for adding an effect.
         max_steps: most effects added.
@@ -271,7 +272,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                     "sensitivity_explained": best["sensitivity_explained"],
                     "relative_improvement": round(rel, 4)}
         steps.append(Step(best["name"], evidence, values, polished.nmse,
-                          validation_nmse(vprob, polished.params),
+                          _validate_nmse(vprob, polished.params),
                           (current.cost - polished.cost) / current.cost, candidates,
                           polished.params))
         current = polished
@@ -322,9 +323,9 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         base_effects=tuple(params.effects), nmse_given=given, before=before, steps=steps,
         after=current, where_before=where_before, where_after=_where(problem, current.params),
         final_candidates=candidates, conclusion=conclusion,
-        nmse_given_validation=validation_nmse(vprob, params),
-        nmse_before_validation=validation_nmse(vprob, before.params),
-        nmse_after_validation=validation_nmse(vprob, current.params),
+        nmse_given_validation=_validate_nmse(vprob, params),
+        nmse_before_validation=_validate_nmse(vprob, before.params),
+        nmse_after_validation=_validate_nmse(vprob, current.params),
         validation_source=None if validate is None else validate.source,
         untestable=untestable, untestable_why=untestable_why, outcome=outcome,
         unexplained_channels=stuck, compare=problem.compare,
@@ -336,6 +337,10 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                                                                  before.params),
         nmse_record_after=None if full is None else _full_nmse(full, params, problem,
                                                                current.params))
+
+
+def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
+    return None if vp is None else vp.nmse(p)
 
 
 def _full_nmse(record: Record, params: JointParams, problem: Problem,
