@@ -6,6 +6,7 @@ bad-input checks together; the package's modules each have their tests here.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -76,6 +77,33 @@ def test_model_params_follow_effects_and_record_kind():
     assert "friction.output.coulomb" in free and "load.inertia" in free
     locked = {fp.path for fp in model_params(p, Scales(**{**SCALES.__dict__, "locked": True}))}
     assert "friction.output.coulomb" not in locked and "load.inertia" not in locked
+
+
+def test_a_given_models_effects_are_refined_where_the_record_reaches_too_little_to_name_them():
+    """A record too lightly loaded to name load-dependent friction still moves with the
+    tooth friction a given model has: the base fit refines it, as it does a segmented
+    spring below half the peak torque. An effect untestable for want of a kind of motion
+    (a locked output, no standstills) stays as given, as does one given as zero; an effect
+    a search adds must be testable."""
+    from hdgym.params import preset
+
+    p = preset("hduc20")
+    s = dataclasses.replace(SCALES, moving=1.0, reversals=4, wg_turns=10.0, standstills=0,
+                            moving_torque_share=0.05, torque_share=0.1)
+    load = REGISTRY["load_dependent_friction"]
+    assert not load.testable(s) and load.too_small(s)
+    assert "friction.tooth_mu" in {fp.path for fp in model_params(p, s, p)}
+    assert "friction.tooth_mu" not in {fp.path for fp in model_params(p, s)}
+    spring = {"compliance.segment_stiffness[0]", "compliance.segment_stiffness[1]"}
+    assert REGISTRY["nonlinear_stiffness"].too_small(s)
+    assert spring <= {fp.path for fp in model_params(p, s, p)}
+    locked = dataclasses.replace(s, locked=True)
+    assert not load.too_small(locked)
+    assert "friction.tooth_mu" not in {fp.path for fp in model_params(p, locked, p)}
+    assert not REGISTRY["stiction"].testable(s) and not REGISTRY["stiction"].too_small(s)
+    assert not load.too_small(dataclasses.replace(s, moving_torque_share=0.5))  # testable
+    no_tooth = set_values(p, {"friction.tooth_mu": 0.0})
+    assert "friction.tooth_mu" not in {fp.path for fp in model_params(no_tooth, s, no_tooth)}
 
 
 # ---------------------------------------------------------------- residuals

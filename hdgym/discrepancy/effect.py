@@ -92,10 +92,16 @@ class Scales:
 
 @dataclass(frozen=True)
 class Condition:
-    """What a record must show for an effect to be seen: ``needs`` (words) and the check."""
+    """What a record must show for an effect to be seen: ``needs`` (words) and the check.
+
+    ``size``: the condition asks only how far into the effect's range the record goes (a
+    share of the drive's peak torque), not for a kind of motion that sets the effect apart
+    from others; a record that misses it still moves with the effect's parameters.
+    """
 
     needs: str
     check: Callable[[Scales], bool] = field(repr=False)
+    size: bool = False
 
 
 FREE = Condition("a free output (this record's output is locked)", lambda s: not s.locked)
@@ -125,7 +131,7 @@ TORSION = Condition("the torsion (a locked output, a torque sensor or the transm
                     lambda s: s.torsion_measured)
 HIGH_TORQUE = Condition("torque beyond half the drive's peak torque (a hardening spring shows "
                         "at high torsion) or, on a locked output, the spring curve compared",
-                        lambda s: s.torque_share >= 0.5 or s.spring)
+                        lambda s: s.torque_share >= 0.5 or s.spring, size=True)
 REVERSALS = Condition("reversals (the motion changes direction at least twice)",
                       lambda s: s.reversals >= 2)
 STANDSTILL = Condition("standstill and breakaway (the joint stops for 30 ms or more and starts "
@@ -162,7 +168,7 @@ SPEED_BAND = Condition(
     "run-up)",
     lambda s: SPEED_SPREAD.check(s) or s.band_time >= BAND_TIME)
 LOADED = Condition("transmitted torque while moving beyond a fifth of the drive's peak torque",
-                   lambda s: s.moving_torque_share >= 0.2)
+                   lambda s: s.moving_torque_share >= 0.2, size=True)
 
 
 @dataclass(frozen=True)
@@ -234,6 +240,15 @@ class Effect:
     def testable(self, s: Scales) -> bool:
         """Whether a record with scales ``s`` can reveal this effect."""
         return self.why_not(s) is None
+
+    def too_small(self, s: Scales) -> bool:
+        """Whether a record with scales ``s`` moves with this effect's parameters but does
+        not reach far enough into its range to name it: not testable, and every condition
+        it misses is a :attr:`Condition.size` one (a segmented spring below half the peak
+        torque, tooth friction at light load). A base model that has the effect is off by
+        its parameters there as much as by any other's."""
+        missing = [c for c in self.seen if not c.check(s)]
+        return bool(missing) and all(c.size for c in missing)
 
     def fit_params(self, p: JointParams, s: Scales) -> list[FitParam]:
         """Parameters to fit for this effect, with bounds (containing the current value)."""
