@@ -28,9 +28,12 @@ def _one_way_stub(monkeypatch, answers: list[_OneWay]) -> list[tuple]:
     from hdgym.discrepancy import workflow as W
 
     calls, todo = [], list(answers)
+    labels = LABELS
+    labels.clear()
 
-    def one_way(record, params, validate, min_score=W.MIN_SCORE, **kw):
+    def one_way(record, params, validate, min_score=W.MIN_SCORE, desc="diagnose", **kw):
         calls.append((record.source, getattr(validate, "source", None), min_score))
+        labels.append(desc)
         return todo.pop(0)
 
     monkeypatch.setattr(W, "_one_way", one_way)
@@ -38,6 +41,8 @@ def _one_way_stub(monkeypatch, answers: list[_OneWay]) -> list[tuple]:
 
 
 A, B = SimpleNamespace(source="a.csv"), SimpleNamespace(source="b.csv")
+LABELS: list[str] = []
+"""The progress-bar labels of the stub's calls, in order (cleared by each stub)."""
 
 
 def test_an_unexplained_search_runs_again_with_every_candidate_then_the_records_swapped(
@@ -55,6 +60,9 @@ def test_an_unexplained_search_runs_again_with_every_candidate_then_the_records_
     d = diagnose(A, None, B)
     assert calls == [("a.csv", "b.csv", MIN_SCORE), ("a.csv", "b.csv", 0.0),
                      ("b.csv", "a.csv", MIN_SCORE)]
+    # each search's progress bar says which it is
+    assert LABELS == ["diagnose", "diagnose again, every candidate trial-refitted",
+                      "diagnose again, the records' roles swapped"]
     assert d.source == "b.csv" and d.steps == named.steps
     assert d.conclusion.endswith("found it") and "roles swapped" in d.conclusion
     same = _OneWay("a.csv", "named", steps=["stribeck_friction"], conclusion="found that")

@@ -153,7 +153,8 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     for searched, checked, gate, how in (
             (record, validate, 0.0, "every candidate trial-refitted"),
             (validate, record, MIN_SCORE, "the records' roles swapped")):
-        again = _one_way(searched, params, checked, **kw, min_score=gate)
+        again = _one_way(searched, params, checked, **kw, min_score=gate,
+                         desc=f"diagnose again, {how}")
         where = f"{how} (searched on {searched.source}, checked on {checked.source})"
         if again.steps:
             return replace(again, seconds=_time.perf_counter() - t0, conclusion=(
@@ -167,10 +168,11 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
 def _one_way(record: Record, params: JointParams, validate: Record | None, *,
              mode: str, threshold: float, max_steps: int, quick: bool, cutoff: float | None,
              segment: float | str | None, fit_window: float | None,
-             min_score: float = MIN_SCORE) -> Diagnosis:
+             min_score: float = MIN_SCORE, desc: str = "diagnose") -> Diagnosis:
     """:func:`diagnose` with ``record`` searched and ``validate`` the check (arguments as
     there; ``min_score``: the least share of the residual a linearized refit must explain
-    for any trial refit, :func:`.search.search_round`)."""
+    for any trial refit, :func:`.search.search_round`; ``desc``: the progress bar's
+    label)."""
     t0 = _time.perf_counter()
     full = None
     if fit_window and record.duration > fit_window * 1.001:
@@ -193,7 +195,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     untestable_why = {n: w for n, w in why.items() if w is not None}
     untestable = list(untestable_why)
 
-    prog = bar(total=max_steps + 1, desc="diagnose", unit="fit")
+    prog = bar(total=max_steps + 1, desc=desc, unit="fit")
     given = problem.nmse(params)
     base_paths = [fp.path for fp in model_params(params, problem.scales, params)]
     before = fit(problem, params, model_params(params, problem.scales, params),
