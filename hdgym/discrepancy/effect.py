@@ -173,12 +173,19 @@ LOADED = Condition("transmitted torque while moving beyond a fifth of the drive'
 
 @dataclass(frozen=True)
 class FitParam:
-    """One fitted parameter: dotted ``path``, bounds and an initial guess (None: keep)."""
+    """One fitted parameter: dotted ``path``, bounds and an initial guess (None: keep).
+
+    ``late``: refined only once the others have converged (:func:`.settle.converge`'s rounds
+    after the first; a plain :func:`.fitting.fit` leaves it as it is): a given model's
+    parameter of an effect the record reaches too little of to name
+    (:func:`.registry.model_params`).
+    """
 
     path: str
     lower: float
     upper: float
     guess: float | None = None
+    late: bool = False
 
 
 @dataclass(frozen=True)

@@ -102,8 +102,9 @@ def readings(problem, quantized: bool):
 
 def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 40,
         decimate: int | None = None, diff_step: float | None = None,
-        search: bool = False, central: bool = False) -> FitResult:
-    """Bounded least squares of ``fps`` (starting at their guesses or current values).
+        search: bool = False, central: bool = False, late: bool = False) -> FitResult:
+    """Bounded least squares of ``fps`` (starting at their guesses or current values; those
+    :attr:`.effect.FitParam.late` only with ``late``, else they stay as they are).
 
     Variables are scaled to their bounds (``z = 1 + (x - lo)/(hi - lo)``) so
     a relative finite-difference step (:data:`DIFF_STEP`) is that share of each range.
@@ -130,7 +131,7 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     if decimate is None:
         first = problem.measured.get(problem.names[0])  # (line channels: coefficients)
         decimate = 1 if first is None else max(1, first.size // 8000)
-    fps = [fp for fp in fps if fp.upper > fp.lower]
+    fps = [fp for fp in fps if fp.upper > fp.lower and (late or not fp.late)]
     if not fps:
         nm = problem.nmse(p)
         return FitResult(p, {}, nm, 0, nm["mean"] / 100)

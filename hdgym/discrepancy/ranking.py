@@ -127,7 +127,7 @@ def rank_candidates(problem: Problem, current: JointParams,
     r0 = _stack(problem, res)
     _, w = _weighted(problem, res)
     ctx = problem.masked_context()
-    base_fps = model_params(current, problem.scales, anchor)
+    base_fps = [fp for fp in model_params(current, problem.scales, anchor) if not fp.late]
     base_cols = _columns(problem, current, base_fps, r0)
     base_frac = (R._lstsq_explained(-r0, np.column_stack([c for *_, c in base_cols]))[0]
                  if base_cols else 0.0)

@@ -56,11 +56,12 @@ def converge(problem, p: JointParams, fps: list[FitParam], nfev: int,
 
     Wherever the workflow compares fits refitted until they converge (an effect's polish
     and its control, :func:`.search.search_round`; :func:`settle`; :func:`converge_named`),
-    both sides are refitted by this, so neither is credited with the other's slack."""
+    both sides are refitted by this, so neither is credited with the other's slack. The
+    :attr:`.effect.FitParam.late` parameters join from the second round on."""
     best = None
     q = p
-    for _ in range(rounds):
-        r = fit(problem, q, fps, max_nfev=nfev, central=True, **kw)
+    for i in range(rounds):
+        r = fit(problem, q, fps, max_nfev=nfev, central=True, late=i > 0, **kw)
         if best is not None and not r.cost < best.cost:
             break
         gain = 1.0 if best is None else (best.cost - r.cost) / best.cost
