@@ -85,7 +85,8 @@ def model_params(p: JointParams, s: Scales, anchor: JointParams | None = None
     those parameters too (development case hduc20 / none / sine:3.43:1, seed 158, off 5 %:
     a spring's segment stiffnesses off 4 % and the tooth friction coefficient off 3 %,
     neither testable there, each alone left 0.12-0.16 % NMSE; without them the base fit
-    stopped at 0.0136 %, with them it reached 0.00027 %, the true joint's 0.00026 %).
+    stopped at 0.0136 %, with them (staged, below) it reaches 0.00038 %, the
+    true joint's 0.00026 %).
     They are :attr:`.effect.FitParam.late`: refined only once the others have converged
     (from the given model at once, on the first second of the development case hduc20 /
     stiction / sine:3.34:2, seed 146, least squares stopped where it started, 3.18 % NMSE,
