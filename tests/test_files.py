@@ -85,12 +85,13 @@ def test_compile_notice_once_per_block(capsys):
 
 LONG_JOBS = ["hdgym/reproduce/common.py", "hdgym/numerics.py", "hdgym/bench.py",
              "hdgym/discrepancy/workflow.py", "controllers/benchmark.py", "hdgym/sweep/runner.py",
-             "hdgym/reproduce/calibration.py"]
+             "hdgym/reproduce/calibration.py", "hdgym/discrepancy/pool.py"]
 
 
 @pytest.mark.parametrize("path", LONG_JOBS)
 def test_long_jobs_show_progress(path):
-    """controllers, diagnose, reproduce, bench, numerics, sweep and the calibration scan loop
+    """controllers, diagnose, reproduce, bench, numerics, sweep, the calibration scan loop
+    and the discrepancy pages' case loop (python -m hdgym.discrepancy.cases / .holdout)
     under a bar: each calls hdgym.progress's ``bar`` (imported is not enough). Behaviour: the
     reproduce bar below, the sweep's in tests/test_sweep.py."""
     import ast

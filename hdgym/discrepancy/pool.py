@@ -6,9 +6,13 @@ from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
+from hdgym.progress import bar
 
-def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int = 1) -> Iterator[Any]:
-    """``fn(item)`` for each item, yielded in the items' order.
+
+def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int = 1,
+                desc: str = "cases") -> Iterator[Any]:
+    """``fn(item)`` for each item, yielded in the items' order, under a progress bar
+    (``desc``: its label; one tick per item done).
 
     With ``jobs`` > 1 the calls run in that many worker processes (each case is seeded and
     independent, so the results are the same as one after the other; only the wall times
@@ -16,9 +20,13 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int = 1) -
     function or a :func:`functools.partial` of one).
     """
     items = list(items)
-    if jobs <= 1 or len(items) <= 1:
-        for it in items:
-            yield fn(it)
-        return
-    with ProcessPoolExecutor(max_workers=jobs) as ex:
-        yield from ex.map(fn, items)
+    with bar(total=len(items), desc=desc, unit="case") as done:
+        if jobs <= 1 or len(items) <= 1:
+            for it in items:
+                yield fn(it)
+                done.update(1)
+            return
+        with ProcessPoolExecutor(max_workers=jobs) as ex:
+            for r in ex.map(fn, items):
+                yield r
+                done.update(1)
