@@ -241,8 +241,12 @@ class Effect:
 
     def why_not(self, s: Scales) -> str | None:
         """Why a record with scales ``s`` cannot reveal this effect (None: it can)."""
-        missing = [c.needs for c in self.seen if not c.check(s)]
-        return "needs " + "; ".join(missing) if missing else None
+        missing = self._missing(s)
+        return "needs " + "; ".join(c.needs for c in missing) if missing else None
+
+    def _missing(self, s: Scales) -> list[Condition]:
+        """The conditions of :attr:`seen` a record with scales ``s`` does not meet."""
+        return [c for c in self.seen if not c.check(s)]
 
     def testable(self, s: Scales) -> bool:
         """Whether a record with scales ``s`` can reveal this effect."""
@@ -254,7 +258,7 @@ class Effect:
         it misses is a :attr:`Condition.size` one (a segmented spring below half the peak
         torque, tooth friction at light load). A base model that has the effect is off by
         its parameters there as much as by any other's."""
-        missing = [c for c in self.seen if not c.check(s)]
+        missing = self._missing(s)
         return bool(missing) and all(c.size for c in missing)
 
     def fit_params(self, p: JointParams, s: Scales) -> list[FitParam]:

@@ -106,12 +106,12 @@ def model_params(p: JointParams, s: Scales, anchor: JointParams | None = None
     for name in p.effects:
         eff = REGISTRY[name]
         anchored = anchor is not None and name in anchor.effects
-        if not (eff.testable(s) or anchored and eff.too_small(s)):
+        late = not eff.testable(s)
+        if late and not (anchored and eff.too_small(s)):
             continue
         if anchored and not all(c.check(s) for c in eff.refit):
             continue  # the record shows it but cannot pin the base model's values down
         fps = eff.fit_params(p, s)
-        late = not eff.testable(s)
         if late:
             fps = [fp for fp in fps if _given(anchor, fp.path) > 0]
         for fp in fps:

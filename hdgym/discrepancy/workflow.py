@@ -197,9 +197,9 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
 
     prog = bar(total=max_steps + 1, desc=desc, unit="fit")
     given = problem.nmse(params)
-    base_paths = [fp.path for fp in model_params(params, problem.scales, params)]
-    before = fit(problem, params, model_params(params, problem.scales, params),
-                 max_nfev=nfev_base)
+    base_fps = model_params(params, problem.scales, params)
+    base_paths = [fp.path for fp in base_fps]
+    before = fit(problem, params, base_fps, max_nfev=nfev_base)
     if auto and not problem.inverse:
         # the horizon: chosen with the fitted base model (a given model that is some per
         # cent off drifts on any long horizon; the fitted one only where the record does)
