@@ -9,6 +9,8 @@ and state what the blind cases (one command, as issue 14 defines them) allow.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -101,6 +103,26 @@ def test_effect_size_is_what_the_base_model_lacks() -> None:
     train, _ = holdout.records(case, truth)
     size, noise = holdout.effect_size(case, truth, train)
     assert size > holdout.PRESENT * noise  # was 0: "not present"
+
+
+def test_an_effect_only_the_validation_record_shows_is_present() -> None:
+    """Development seed 254: at 0.159 A the training run of tuttle-joint3 barely moves and
+    the position-dependent friction changes nothing there, while the validation run at
+    0.284 A shows it plainly. The roles-swapped search reads that record, so the effect
+    counts as missing, and "nothing missing" would not be honest."""
+    case = next(c for c in holdout.holdout_cases(254)
+                if c.preset == "tuttle-joint3" and c.hidden == "position_dependent_friction")
+    truth = holdout.case_truth(case)
+    train, val = holdout.records(case, truth)
+    size, noise = holdout.effect_size(case, truth, train)
+    vsize, vnoise = holdout.effect_size(case, truth, val, case.validation, seed=2)
+    assert size < holdout.PRESENT * noise and vsize > holdout.PRESENT * vnoise
+    d = SimpleNamespace(outcome="nothing missing", missing_effects=[], untestable=[],
+                        nmse_before=1.0, nmse_after=1.0, nmse_cut=0.0)
+    r = holdout.Result(case, d, 1.0, size, noise, val_size=vsize, val_noise=vnoise)
+    assert r.present and not r.hit and not r.honest
+    alone = holdout.Result(case, d, 1.0, size, noise, val_size=0.0, val_noise=vnoise)
+    assert not alone.present and alone.hit
 
 
 def test_blind_base_is_the_issue_command() -> None:
