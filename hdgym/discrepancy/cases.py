@@ -437,7 +437,10 @@ def main(argv: list[str] | None = None) -> int:
         "Tuttle's joints), the second only when it drifts by at least 0.5 rad against the "
         "first over the record. The tuttle-joint1 case (161:1, flexspline grounded: lines at "
         "2 (1 - 1/161), 2 and 4 (1 - 1/161) per WG turn) needs them: with the grounded lines "
-        "only, its validation NMSE rose instead of falling (an earlier run).",
+        "only, its validation NMSE rose instead of falling (an earlier run). Where a trial "
+        "refit has both splines' lines, each order's lines folded into one at either spline "
+        "are refitted too, and kept where they carry over better "
+        "(`hdgym.discrepancy.parsimony.one_port_lines`, `better_on_validation`).",
         "- The per-effect tests in `tests/test_discrepancy.py` run the same cases on 2 s "
         "records.",
         "",

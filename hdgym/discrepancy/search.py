@@ -6,12 +6,14 @@ runs the rounds, adds what passes and repeats.
 
 from __future__ import annotations
 
-from hdgym.params import JointParams
+import math
+
+from hdgym.params import GROUNDED, JointParams
 
 from . import friction_fit as FF
 from .fitting import FitResult, fit, rescored
 from .outcome import NOISE_FACTOR, carries_over
-from .parsimony import NESTED, simpler_does_nearly_as_well
+from .parsimony import NESTED, better_on_validation, one_port_lines, simpler_does_nearly_as_well
 from .paths import reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, rank_candidates
@@ -69,6 +71,27 @@ def trial(problem: Problem, current: FitResult, given: JointParams, base_paths: 
     return res.cost, cand, res
 
 
+def _one_port_forms(problem: Problem, vprob: Problem, current: FitResult,
+                    given: JointParams, winner: tuple, nfev: int) -> list[tuple]:
+    """A kinematic-error trial's simpler forms, each order's lines folded into one at either
+    spline (:func:`.parsimony.one_port_lines`) and refitted, best first on the validation
+    record: ``(cost, entry, fit)`` as :func:`trial` returns."""
+    out = []
+    for port in GROUNDED:
+        q = one_port_lines(winner[2].params, port)
+        if q is None:
+            continue
+        r = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev, central=True)
+        rel = (current.cost - r.cost) / current.cost if current.cost > 0 else 0.0
+        out.append((r.cost, {**winner[1], "form": f"lines at the {port}",
+                             "relative_improvement": rel}, r))
+    def score(t: tuple) -> float:
+        v = vprob.nmse(t[2].params)["mean"]
+        return v if math.isfinite(v) else math.inf
+
+    return sorted(out, key=score)
+
+
 def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                  given: JointParams, base_paths: list[str], threshold: float, nfev_trial: int,
                  nfev_polish: int, mean_gain: float = 0.0, newton: bool = False,
@@ -109,6 +132,11 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
         k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
         if simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
             trials.insert(0, trials.pop(k))
+    if trials[0][1]["name"] == "kinematic_error" and vprob is not None:
+        # and its lines at one spline, refitted: kept where they carry over better
+        forms = _one_port_forms(problem, vprob, current, params, trials[0], nfev_trial)
+        if forms and better_on_validation(vprob, trials[0], forms[0]):
+            trials[0] = forms[0]
     accepted = ctrl = v_now = None  # (the control polish and validation NMSE: once)
     reasons = []
     for _, best, res in trials:  # the best candidate that passes every check
