@@ -48,6 +48,17 @@ def _start(truth, fa, fb):
                               PATHS[1]: fb * get_value(truth, PATHS[1])})
 
 
+def _valley(monkeypatch, truth, gain):
+    """A training record that sees only the sum of the two errors (a valley), a validation
+    record that sees each (``gain`` x), and a base fit stopped in the valley off the truth:
+    ``(train, validation, fit)``."""
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
+    val = _Record(truth, [[gain, 0.0], [0.0, gain], [0.0, 0.0]])
+    p0 = _start(truth, 1.04, 0.96)  # in the training valley: its cost there is zero
+    return train, val, FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
+
+
 def test_converge_refits_until_the_cost_stops_falling():
     """One fit's budget stops short on a long, ill-conditioned valley; further rounds reach
     the optimum, and they stop once a round gains little."""
@@ -89,11 +100,8 @@ def test_settle_refits_on_both_records_when_training_does_not_pin_the_parameters
     of that setting is no missing effect. Refitted on both records it goes; a residual no
     parameter reaches (a missing effect, in both records) stays."""
     truth = preset("tuttle-joint3")
-    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
-    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
-    val = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])
-    p0 = _start(truth, 1.04, 0.96)  # in the training valley: its cost there is zero
-    cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
+    train, val, cur = _valley(monkeypatch, truth, 10.0)
+    p0 = cur.params
     assert val.nmse(p0)["mean"] > 10.0
     out, why, alone = S.settle(train, val, cur, truth, 20, False, "nothing (more) worth adding")
     assert val.nmse(out.params)["mean"] < 0.01
@@ -112,13 +120,10 @@ def test_settle_leaves_the_validation_record_alone_when_a_candidate_explained_pa
     """With ``both`` False (a candidate passed every check of the search but the cut asked
     at an escalated horizon) the residual is partly an effect's: no refit on both records."""
     truth = preset("tuttle-joint3")
-    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
-    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
-    val = _Record(truth, [[10.0, 0.0], [0.0, 10.0], [0.0, 0.0]])
-    p0 = _start(truth, 1.04, 0.96)
-    cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
+    train, val, cur = _valley(monkeypatch, truth, 10.0)
     out, why, _ = S.settle(train, val, cur, truth, 20, False, "", both=False)
-    assert val.nmse(out.params)["mean"] == pytest.approx(val.nmse(p0)["mean"], rel=0.05)
+    assert val.nmse(out.params)["mean"] == pytest.approx(val.nmse(cur.params)["mean"],
+                                                         rel=0.05)
     assert "together" not in why
 
 
@@ -205,12 +210,8 @@ def test_settle_refits_on_both_records_when_validation_is_resolved_but_far_above
     from hdgym.discrepancy.outcome import RESOLVED, at_noise_level, carry_gap
 
     truth = preset("tuttle-joint3")
-    monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
-    train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
-    val = _Record(truth, [[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]])
-    p0 = _start(truth, 1.04, 0.96)
-    cur = FitResult(p0, {}, train.nmse(p0), 0, train.nmse(p0)["mean"] / 100)
-    v0 = val.nmse(p0)["mean"]
+    train, val, cur = _valley(monkeypatch, truth, 1.0)
+    v0 = val.nmse(cur.params)["mean"]
     assert at_noise_level(v0, val.noise["mean"]) and v0 < RESOLVED
     assert carry_gap(v0, cur.nmse["mean"], val.noise["mean"]) is not None
     out, why, _ = S.settle(train, val, cur, truth, 20, False, "")
