@@ -67,8 +67,8 @@ def one_port_lines(p: JointParams, port: str) -> JointParams | None:
     between the splines, validation NMSE 16.4 %; folded into the grounded spline's line and
     refitted, 5.9 %, the true line alone there). Which spline's teeth make a drive's lines
     is not known beforehand (Tuttle's joints have them on the circular spline, the one not
-    grounded), so the search tries both (:func:`.search.search_round`) and keeps the better
-    where it carries over better (:func:`better_on_validation`)."""
+    grounded), so the search folds them into either (:func:`.search.search_round`) and keeps
+    the folded form where it carries over better (:func:`better_on_validation`)."""
     ke = p.kinematic_error
     if all(h.port == port for h in ke.harmonics):
         return None

@@ -85,6 +85,7 @@ def _one_port_forms(problem: Problem, vprob: Problem, current: FitResult,
         rel = (current.cost - r.cost) / current.cost if current.cost > 0 else 0.0
         out.append((r.cost, {**winner[1], "form": f"lines at the {port}",
                              "relative_improvement": rel}, r))
+
     def score(t: tuple) -> float:
         v = vprob.nmse(t[2].params)["mean"]
         return v if math.isfinite(v) else math.inf
