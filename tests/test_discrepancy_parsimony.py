@@ -42,8 +42,10 @@ class _Val:
 
     def __init__(self, table):
         self.table = table
+        self.calls: dict = {}
 
     def nmse(self, p):
+        self.calls[p] = self.calls.get(p, 0) + 1
         return {"mean": self.table[p]}
 
 
@@ -56,10 +58,17 @@ def test_a_simpler_form_wins_only_where_it_carries_over_better():
     fits = {k: SimpleNamespace(params=k) for k in (now, split, one)}
     winner = (0.1, {"relative_improvement": 0.99}, fits[split])
     simpler = (0.2, {"relative_improvement": 0.98}, fits[one])
-    assert better_on_validation(_Val({now: 45.9, split: 16.4, one: 5.9}), winner, simpler)
+    assert better_on_validation(_Val({now: 45.9, split: 16.4, one: 5.9}), winner,
+                                [simpler]) is simpler
     assert simpler[1]["validation_nmse"] == 5.9 and winner[1]["validation_nmse"] == 16.4
     tj1 = _Val({now: 52.7, split: 0.155, one: 3.7})
-    assert not better_on_validation(tj1, winner, simpler)
+    assert better_on_validation(tj1, winner, [simpler]) is None
     assert simpler_does_nearly_as_well(tj1, fits[now], winner, simpler)  # (what it replaces)
-    assert not better_on_validation(_Val({now: 1.0, split: 0.5, one: math.nan}), winner,
-                                    simpler)
+    assert better_on_validation(_Val({now: 1.0, split: 0.5, one: math.nan}), winner,
+                                [simpler]) is None
+    # of two forms, the one that carries over best; each NMSE computed once
+    other = (0.3, {"relative_improvement": 0.9}, SimpleNamespace(params="other"))
+    val = _Val({now: 45.9, split: 16.4, one: 5.9, "other": 2.0})
+    assert better_on_validation(val, winner, [simpler, other]) is other
+    assert val.calls == {"split": 1, "one": 1, "other": 1}
+    assert better_on_validation(val, winner, []) is None

@@ -6,8 +6,6 @@ runs the rounds, adds what passes and repeats.
 
 from __future__ import annotations
 
-import math
-
 from hdgym.params import GROUNDED, JointParams
 
 from . import friction_fit as FF
@@ -65,32 +63,30 @@ def trial(problem: Problem, current: FitResult, given: JointParams, base_paths: 
     fits = [fit(problem, s, model_params(s, problem.scales, given), max_nfev=nfev,
                 central=True) for s in starts]
     res = min(fits, key=lambda f: f.cost)
-    rel = (current.cost - res.cost) / current.cost if current.cost > 0 else 0.0
     cand["trial_nmse"] = res.nmse["mean"]
-    cand["relative_improvement"] = rel
+    cand["relative_improvement"] = _cut(current, res.cost)
     return res.cost, cand, res
 
 
-def _one_port_forms(problem: Problem, vprob: Problem, current: FitResult,
-                    given: JointParams, winner: tuple, nfev: int) -> list[tuple]:
+def _one_port_forms(problem: Problem, current: FitResult, given: JointParams, winner: tuple,
+                    nfev: int) -> list[tuple]:
     """A kinematic-error trial's simpler forms, each order's lines folded into one at either
-    spline (:func:`.parsimony.one_port_lines`) and refitted, best first on the validation
-    record: ``(cost, entry, fit)`` as :func:`trial` returns."""
+    spline (:func:`.parsimony.one_port_lines`) and refitted: ``(cost, entry, fit)`` as
+    :func:`trial` returns."""
     out = []
     for port in GROUNDED:
         q = one_port_lines(winner[2].params, port)
         if q is None:
             continue
         r = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev, central=True)
-        rel = (current.cost - r.cost) / current.cost if current.cost > 0 else 0.0
         out.append((r.cost, {**winner[1], "form": f"lines at the {port}",
-                             "relative_improvement": rel}, r))
+                             "relative_improvement": _cut(current, r.cost)}, r))
+    return out
 
-    def score(t: tuple) -> float:
-        v = vprob.nmse(t[2].params)["mean"]
-        return v if math.isfinite(v) else math.inf
 
-    return sorted(out, key=score)
+def _cut(current: FitResult, cost: float) -> float:
+    """The share of ``current``'s cost a fit at ``cost`` removes (0 at a zero cost)."""
+    return (current.cost - cost) / current.cost if current.cost > 0 else 0.0
 
 
 def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
@@ -135,9 +131,8 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
             trials.insert(0, trials.pop(k))
     if trials[0][1]["name"] == "kinematic_error" and vprob is not None:
         # and its lines at one spline, refitted: kept where they carry over better
-        forms = _one_port_forms(problem, vprob, current, params, trials[0], nfev_trial)
-        if forms and better_on_validation(vprob, trials[0], forms[0]):
-            trials[0] = forms[0]
+        forms = _one_port_forms(problem, current, params, trials[0], nfev_trial)
+        trials[0] = better_on_validation(vprob, trials[0], forms) or trials[0]
     accepted = ctrl = v_now = None  # (the control polish and validation NMSE: once)
     reasons = []
     for _, best, res in trials:  # the best candidate that passes every check
@@ -151,7 +146,7 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
             polished = converge(problem, res.params,
                                 model_params(res.params, problem.scales, params), nfev_polish)
             polished = res if polished.cost > res.cost else polished
-        rel_p = (current.cost - polished.cost) / current.cost if current.cost > 0 else 0.0
+        rel_p = _cut(current, polished.cost)
         gain = current.nmse["mean"] - polished.nmse["mean"]
         if rel_p < threshold or gain < min_gain:
             reasons.append(f"{best['name']} would cut the cost by {100 * rel_p:.1f} % "
