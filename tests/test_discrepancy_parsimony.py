@@ -9,7 +9,9 @@ from types import SimpleNamespace
 import pytest
 
 from hdgym.discrepancy.parsimony import (
+    SIMPLER_FORMS,
     better_on_validation,
+    one_port_forms,
     one_port_lines,
     simpler_does_nearly_as_well,
 )
@@ -32,6 +34,11 @@ def test_one_port_lines_fold_each_orders_lines_into_one():
     two = dataclasses.replace(tj1, kinematic_error=KinematicError(harmonics=(
         Harmonic(2.0, 1e-4, 0.0, "circular_spline"), Harmonic(2.0, 1e-4, math.pi / 2,
                                                               "flexspline"))))
+    # the forms the search refits after a kinematic-error trial: one an order at each spline
+    assert SIMPLER_FORMS["kinematic_error"] is one_port_forms
+    assert [label for label, _ in one_port_forms(tj1)] == [
+        "lines at the flexspline", "lines at the circular_spline"]
+    assert [label for label, _ in one_port_forms(rh25)] == ["lines at the flexspline"]
     h = one_port_lines(two, "flexspline").kinematic_error.harmonics
     assert len(h) == 1 and h[0].amplitude == pytest.approx(math.sqrt(2) * 1e-4)
     assert h[0].phase == pytest.approx(math.pi / 4)

@@ -6,7 +6,7 @@ import cmath
 import dataclasses
 import math
 
-from hdgym.params import JointParams
+from hdgym.params import GROUNDED, JointParams
 
 from .fitting import FitResult
 from .problem import Problem
@@ -85,3 +85,16 @@ def one_port_lines(p: JointParams, port: str) -> JointParams | None:
                                      phase=cmath.phase(z), port=port)
                  for o, z in lines.items())
     return dataclasses.replace(p, kinematic_error=dataclasses.replace(ke, harmonics=kept))
+
+
+def one_port_forms(p: JointParams) -> list[tuple[str, JointParams]]:
+    """A fitted kinematic error's simpler forms: its lines folded into one an order at each
+    spline in turn (:func:`one_port_lines`), as ``(label, model)``."""
+    return [(f"lines at the {port}", q) for port in GROUNDED
+            if (q := one_port_lines(p, port)) is not None]
+
+
+SIMPLER_FORMS = {"kinematic_error": one_port_forms}
+"""Effect -> its simpler forms of a model fitted with it (``forms(model)`` -> ``[(label,
+model)]``): refitted after the effect's trial and kept where one carries over better
+(:func:`better_on_validation`; :func:`.search.search_round`)."""

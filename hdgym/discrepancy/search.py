@@ -6,12 +6,12 @@ runs the rounds, adds what passes and repeats.
 
 from __future__ import annotations
 
-from hdgym.params import GROUNDED, JointParams
+from hdgym.params import JointParams
 
 from . import friction_fit as FF
 from .fitting import FitResult, fit, rescored
 from .outcome import NOISE_FACTOR, carries_over
-from .parsimony import NESTED, better_on_validation, one_port_lines, simpler_does_nearly_as_well
+from .parsimony import NESTED, SIMPLER_FORMS, better_on_validation, simpler_does_nearly_as_well
 from .paths import reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, rank_candidates
@@ -68,18 +68,14 @@ def trial(problem: Problem, current: FitResult, given: JointParams, base_paths: 
     return res.cost, cand, res
 
 
-def _one_port_forms(problem: Problem, current: FitResult, given: JointParams, winner: tuple,
-                    nfev: int) -> list[tuple]:
-    """A kinematic-error trial's simpler forms, each order's lines folded into one at either
-    spline (:func:`.parsimony.one_port_lines`) and refitted: ``(cost, entry, fit)`` as
-    :func:`trial` returns."""
+def _refit_forms(problem: Problem, current: FitResult, given: JointParams, winner: tuple,
+                 forms: list[tuple[str, JointParams]], nfev: int) -> list[tuple]:
+    """A trial's simpler forms (:data:`.parsimony.SIMPLER_FORMS`, ``(label, model)``), each
+    refitted: ``(cost, entry, fit)`` as :func:`trial` returns."""
     out = []
-    for port in GROUNDED:
-        q = one_port_lines(winner[2].params, port)
-        if q is None:
-            continue
+    for label, q in forms:
         r = fit(problem, q, model_params(q, problem.scales, given), max_nfev=nfev, central=True)
-        out.append((r.cost, {**winner[1], "form": f"lines at the {port}",
+        out.append((r.cost, {**winner[1], "form": label,
                              "relative_improvement": _cut(current, r.cost)}, r))
     return out
 
@@ -129,9 +125,12 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
         k = next(i for i, t in enumerate(trials) if t[1]["name"] == simpler)
         if simpler_does_nearly_as_well(vprob, current, trials[0], trials[k]):
             trials.insert(0, trials.pop(k))
-    if trials[0][1]["name"] == "kinematic_error" and vprob is not None:
-        # and its lines at one spline, refitted: kept where they carry over better
-        forms = _one_port_forms(problem, current, params, trials[0], nfev_trial)
+    simpler_forms = SIMPLER_FORMS.get(trials[0][1]["name"])
+    if simpler_forms is not None and vprob is not None:
+        # and the winner's own simpler forms (a kinematic error's lines at one spline),
+        # refitted: kept where they carry over better
+        forms = _refit_forms(problem, current, params, trials[0],
+                             simpler_forms(trials[0][2].params), nfev_trial)
         trials[0] = better_on_validation(vprob, trials[0], forms) or trials[0]
     accepted = ctrl = v_now = None  # (the control polish and validation NMSE: once)
     reasons = []
