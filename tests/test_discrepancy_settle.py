@@ -24,8 +24,9 @@ class _Record:
     inverse = False
     scales = None
 
-    def __init__(self, truth, A, c=None, noise=0.01):
+    def __init__(self, truth, A, c=None, noise=0.01, floor=None):
         self.truth, self.A = truth, np.asarray(A, dtype=float)
+        self.floor = noise if floor is None else floor  # what the model leaves on its own
         self.c = np.zeros(self.A.shape[0]) if c is None else np.asarray(c, dtype=float)
         self.measured = {"x": np.zeros(self.A.shape[0])}
         self.noise = {"x": noise, "mean": noise}
@@ -53,6 +54,7 @@ def _valley(monkeypatch, truth, gain):
     record that sees each (``gain`` x), and a base fit stopped in the valley off the truth:
     ``(train, validation, fit)``."""
     monkeypatch.setattr(S, "model_params", lambda p, scales, given: _fps(truth))
+    monkeypatch.setattr(S, "mean_floor", lambda prob, p: prob.floor)
     train = _Record(truth, [[1.0, 1.0], [1.0, 1.0], [0.0, 0.0]])
     val = _Record(truth, [[gain, 0.0], [0.0, gain], [0.0, 0.0]])
     p0 = _start(truth, 1.04, 0.96)  # in the training valley: its cost there is zero
@@ -217,3 +219,27 @@ def test_settle_refits_on_both_records_when_validation_is_resolved_but_far_above
     out, why, _ = S.settle(train, val, cur, truth, 20, False, "")
     assert val.nmse(out.params)["mean"] < 0.01 * v0
     assert "together" in why
+
+
+def test_settle_refits_on_both_records_when_validation_is_at_noise_but_above_its_floor(
+        monkeypatch):
+    """A validation residual at the noise level but more than twice what the model leaves on
+    a record it made itself is not resolved (:func:`.outcome.resolved`): a fit short of its
+    optimum, or a model mimicking a small effect. The refit on both records runs (the tuned
+    case none (current steps): 0.00153 % against a floor of 0.00046 %, then 0.00086 %); at
+    its floor, it does not."""
+    from hdgym.discrepancy.outcome import at_noise_level, carry_gap, resolved
+
+    truth = preset("tuttle-joint3")
+    train, val, cur = _valley(monkeypatch, truth, 0.25)
+    v0 = val.nmse(cur.params)["mean"]
+    val.floor = 0.1 * v0
+    assert at_noise_level(v0, val.noise["mean"])
+    assert carry_gap(v0, cur.nmse["mean"], val.noise["mean"]) is None
+    assert not resolved(False, v0, val.noise["mean"], val.floor)
+    out, why, _ = S.settle(train, val, cur, truth, 20, False, "")
+    assert val.nmse(out.params)["mean"] < 0.01 * v0
+    assert "together" in why
+    val.floor = v0  # at its floor: resolved, left alone
+    out, why, _ = S.settle(train, val, cur, truth, 20, False, "")
+    assert "together" not in why
