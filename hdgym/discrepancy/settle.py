@@ -129,10 +129,7 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
         return current, conclusion, alone
     v_now = vprob.nmse(current.params)["mean"]
     # resolved on validation is settled, unless it is far above the training record's own
-    # residual: carry_gap judges the refit on both records, so that refit must have run.
-    # Not resolved but at the noise level, above the floor: a base fit short of its optimum
-    # (tuned case none (current steps): 0.00153 % against a floor of 0.00046 %; refitted on
-    # both records, 0.00086 %) or a model mimicking what it lacks, which the refit keeps
+    # residual: carry_gap judges the refit on both records, so that refit must have run
     if (resolved(False, v_now, vprob.noise["mean"], mean_floor(vprob, current.params))
             and carry_gap(v_now, alone, vprob.noise["mean"]) is None):
         return current, conclusion, alone
