@@ -548,7 +548,11 @@ def test_three_outcomes_and_the_next_experiment():
     assert _outcome(["step"], 0.15, 0.001, cands, {}, base, None, 0.1)[0] == "named"
     assert _outcome(["step"], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == (
         "named; rest unexplained")
-    assert _outcome([], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == "nothing missing"
+    # with nothing named the RESOLVED allowance above the noise holds only at the base
+    # model's own floor as well (outcome.resolved)
+    assert _outcome([], 0.15, 0.001, cands, {}, base, None, 0.1)[0] == "nothing missing"
+    assert _outcome([], 0.3, 0.001, cands, {}, base, None, 0.1)[0] == "unexplained"
+    assert _outcome([], 0.3, 0.2, cands, {}, base, None, 0.1)[0] == "nothing missing"
 
 
 def test_a_candidate_that_explains_part_of_the_residual_is_not_nothing_missing():
