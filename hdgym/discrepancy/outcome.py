@@ -242,7 +242,7 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
     final_channels = judged.nmse(p)
     final = final_channels["mean"]
     fl = floor_nmse(judged, p)
-    floor = float(np.mean(list(fl.values()))) if fl else None  # mean_floor, with fl kept
+    floor = float(np.mean(list(fl.values()))) if fl else None
     stuck = dict(stuck)
     # the mean can hide one channel that alone shows what the model lacks
     if resolved(bool(steps), final, judged.noise["mean"], floor):

@@ -98,8 +98,9 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
 
     First on the training record until it converges (:func:`converge`); the horizon is then
     chosen again with it (``choose(problem, vprob, params)`` when ``auto``). Then, when a
-    validation record is given and the residual on it is not resolved (at the noise level
-    and the model's own floor, :func:`.outcome.resolved`), or resolved there but more than
+    validation record is given and the residual on it is not resolved (at the noise level,
+    or within :data:`.outcome.RESOLVED` and the model's own floor: :func:`.outcome.resolved`),
+    or resolved there but more than
     :data:`.outcome.CARRY_FACTOR` x the training record's (what :func:`.outcome.carry_gap`
     reads as a model that does not carry over, after this refit), on both records together
     (:class:`TwoRecords`, with the coordinate search on a stick-slip record): kept when it
