@@ -124,8 +124,12 @@ def at_floor(final: float, floor: float) -> bool:
 def mean_floor(problem: Problem, p: JointParams) -> float | None:
     """The mean over channels of :func:`.floor.floor_nmse` (percent; None when it cannot be
     measured: an inverse comparison, a diverging run)."""
-    fl = floor_nmse(problem, p)
-    return float(np.mean(list(fl.values()))) if fl else None
+    return _channel_mean(floor_nmse(problem, p))
+
+
+def _channel_mean(per_channel: dict[str, float]) -> float | None:
+    """The mean of a per-channel floor (None for an empty one)."""
+    return float(np.mean(list(per_channel.values()))) if per_channel else None
 
 
 def at_noise_level(final: float, noise: float) -> bool:
@@ -242,7 +246,7 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
     final_channels = judged.nmse(p)
     final = final_channels["mean"]
     fl = floor_nmse(judged, p)
-    floor = float(np.mean(list(fl.values()))) if fl else None
+    floor = _channel_mean(fl)  # mean_floor, with the channels kept for the checks below
     stuck = dict(stuck)
     # the mean can hide one channel that alone shows what the model lacks
     if resolved(bool(steps), final, judged.noise["mean"], floor):
