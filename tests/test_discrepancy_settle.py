@@ -243,3 +243,38 @@ def test_settle_refits_on_both_records_when_validation_is_within_resolved_but_ab
     val.floor = v0  # at its floor: resolved, left alone
     out, why, _ = S.settle(train, val, cur, truth, 20, False, "")
     assert "together" not in why
+
+
+def test_settle_named_refits_named_and_base_model_on_both_records(monkeypatch):
+    """A named model whose validation residual is not at its floor, in a valley of the
+    training record, is refitted on both records, and so is the base model it is compared
+    with (both validation NMSE from a fit that saw the validation record); kept while the
+    effect still cuts the base refit's validation NMSE. At its floor, without a validation
+    record, or where the base model refitted alike does as well, nothing is refitted."""
+    truth = preset("tuttle-joint3")
+    train, val, cur = _valley(monkeypatch, truth, 10.0)
+    b0 = _start(truth, 0.97, 1.03)  # the base model, stopped in the valley elsewhere
+    before = FitResult(b0, {}, train.nmse(b0), 0, train.nmse(b0)["mean"] / 100)
+    given = _start(truth, 1.1, 1.1)
+    # the base model lacks what the stand-in's named effect brings: the stiffness free
+    monkeypatch.setattr(S, "model_params",
+                        lambda p, scales, g: _fps(truth)[:1] if p is b0 else _fps(truth))
+    v0 = val.nmse(cur.params)["mean"]
+    assert v0 > 10.0
+    named, base, words = S.settle_named(train, val, cur, before, given, 20, 0.1)
+    assert val.nmse(named.params)["mean"] < 0.01 * v0
+    assert val.nmse(base.params)["mean"] < val.nmse(b0)["mean"]
+    assert val.nmse(named.params)["mean"] < 0.01 * val.nmse(base.params)["mean"]
+    assert named.nmse == train.nmse(named.params)  # reported on the training record
+    assert "together" in words and f"{v0:.3g}" in words
+    assert S.settle_named(train, None, cur, before, given, 20, 0.1) is None
+    # the base model refitted alike does as well: the refit says nothing about the effect
+    # (a part no parameter reaches keeps both refits off zero, where any ratio would do)
+    monkeypatch.setattr(S, "model_params", lambda p, scales, g: _fps(truth))
+    rest = _Record(truth, val.A, c=[0.0, 0.0, 0.3], floor=1e-6)
+    assert S.settle_named(train, rest, cur, before, given, 20, 0.1) is None
+    monkeypatch.setattr(S, "model_params",
+                        lambda p, scales, g: _fps(truth)[:1] if p is b0 else _fps(truth))
+    assert S.settle_named(train, rest, cur, before, given, 20, 0.1) is not None
+    val.floor = v0  # at its own floor: named, nothing to settle
+    assert S.settle_named(train, val, cur, before, given, 20, 0.1) is None

@@ -67,10 +67,11 @@ from .search import (
     MIN_SCORE,
     NEAR,
     THRESHOLD,
+    VALIDATION_GAIN,
     escalate,
     search_round,
 )
-from .settle import converge_named, settle
+from .settle import converge_named, settle, settle_named
 from .spring_search import search_view, views
 
 MAX_STEPS = 4
@@ -314,6 +315,12 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         conclusion += (f"; the final model refitted until it converged: NMSE "
                        f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
         current = refit
+    both = (settle_named(problem, vprob, current, before, params, nfev_base, VALIDATION_GAIN)
+            if steps else None)
+    if both is not None:  # validation NMSE before and after, each from a fit that saw it
+        current, before, words = both
+        conclusion += words
+        where_before = _where(problem, before.params)
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
         candidates, untestable_why, params,
