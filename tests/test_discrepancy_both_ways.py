@@ -1,6 +1,6 @@
 """A diagnosis that names nothing and leaves the residual unexplained searches again, with
-every candidate trial-refitted and with its two records' roles swapped
-(:func:`hdgym.discrepancy.workflow.diagnose`)."""
+every candidate trial-refitted and with its two records' roles swapped; one that finds
+nothing missing checks that with the roles swapped (:func:`hdgym.discrepancy.workflow.diagnose`)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ class _OneWay:
     validation: object = "checked"
     conclusion: str = ""
     seconds: float = 0.0
+    next_experiments: list = field(default_factory=list)
+    unexplained_channels: dict = field(default_factory=dict)
 
 
 def _one_way_stub(monkeypatch, answers: list[_OneWay]) -> list[tuple]:
@@ -80,10 +82,10 @@ def test_an_unexplained_search_runs_again_with_every_candidate_then_the_records_
 @pytest.mark.parametrize("first", [
     _OneWay("a.csv", "named", steps=["stiction"]),
     _OneWay("a.csv", "named; rest unexplained", steps=["stiction"]),
-    _OneWay("a.csv", "nothing missing"),
     _OneWay("a.csv", "unexplained", validation=None),  # a blind validation record, set aside
+    _OneWay("a.csv", "nothing missing", validation=None),  # a blind validation record, set aside
 ])
-def test_the_search_runs_again_only_when_nothing_was_named_and_the_residual_is_unexplained(
+def test_the_search_runs_again_only_when_nothing_was_named_and_the_validation_record_judges(
         monkeypatch, first):
     from hdgym.discrepancy.workflow import diagnose
 
@@ -92,3 +94,34 @@ def test_the_search_runs_again_only_when_nothing_was_named_and_the_residual_is_u
     calls = _one_way_stub(monkeypatch, [_OneWay("a.csv", "unexplained")])
     assert diagnose(A, None).outcome == "unexplained"
     assert len(calls) == 1  # no validation record: no check for a second search
+
+
+def test_nothing_missing_must_hold_with_the_records_roles_swapped(monkeypatch):
+    """*Nothing missing* is checked once with the validation record searched and the
+    training record checking: nothing missing there too keeps it; an effect named there is
+    returned; *unexplained* there makes the outcome *unexplained*, with both searches' next
+    experiments."""
+    from hdgym.discrepancy.search import MIN_SCORE
+    from hdgym.discrepancy.workflow import diagnose
+
+    calm = _OneWay("a.csv", "nothing missing", conclusion="first")
+    calls = _one_way_stub(monkeypatch, [calm, _OneWay("b.csv", "nothing missing")])
+    d = diagnose(A, None, B)
+    assert calls == [("a.csv", "b.csv", MIN_SCORE), ("b.csv", "a.csv", MIN_SCORE)]
+    assert LABELS[1] == "diagnose again, the records' roles swapped"
+    assert d.outcome == "nothing missing" and d.source == "a.csv"
+    assert d.conclusion.startswith("first;") and d.conclusion.endswith("reads nothing missing")
+    named = _OneWay("b.csv", "named", steps=["stribeck_friction"], conclusion="found it")
+    _one_way_stub(monkeypatch, [calm, named])
+    d = diagnose(A, None, B)
+    assert d.steps == named.steps and d.conclusion.endswith("found it")
+    assert "nothing was missing" in d.conclusion
+    calm.next_experiments = ["hdgym experiment breakaway_ramps"]
+    left = _OneWay("b.csv", "unexplained", next_experiments=["hdgym experiment current_sine",
+                                                             "hdgym experiment breakaway_ramps"])
+    _one_way_stub(monkeypatch, [calm, left])
+    d = diagnose(A, None, B)
+    assert d.outcome == "unexplained" and d.source == "a.csv" and not d.steps
+    assert d.next_experiments == ["hdgym experiment breakaway_ramps",
+                                  "hdgym experiment current_sine"]
+    assert "swapped" in d.unexplained_channels and d.conclusion.endswith("reads unexplained")

@@ -359,8 +359,10 @@ def main(argv: list[str] | None = None) -> int:
         "with every candidate trial-refitted, not only those a linearized refit credits "
         "with 3 % of the residual; then with the two records' roles swapped, fitted and "
         "searched on the validation record and each effect checked on the training record "
-        "(one run can show an effect the other hardly shows). When the swapped search names "
-        "an effect, the case's before and after are NMSE on the training record.",
+        "(one run can show an effect the other hardly shows). One that finds nothing "
+        "missing is searched again with the roles swapped, and must find nothing missing "
+        "there too (*unexplained* there makes it *unexplained*). When the swapped search "
+        "names an effect, the case's before and after are NMSE on the training record.",
         "- Each effect declares where it can be seen (`hdgym.discrepancy.effect.Condition`: "
         "free or locked output, motion, reversals, standstill and breakaway, WG turns, a band "
         "of speeds, the torsion, high or transmitted torque). An effect the record cannot "

@@ -20,7 +20,6 @@ from .effect import (
     SIMULATED,
     SPEED_BAND,
     SPEED_SPREAD,
-    STANDSTILL,
     TURNS,
     Condition,
     Effect,
@@ -281,10 +280,14 @@ FRICTION_EFFECTS: tuple[Effect, ...] = (
            _strib_params, _strib_on, _break_neutral, requires=("coulomb_friction",),
            sized=_static_sized, seen=(MOVING, LOW_SPEED),
            channels="speed (or current) near zero speed", protocol="current_sine"),
+    # a stuck joint is held at each reversal as at a standstill: stiction is seen wherever
+    # Stribeck friction, its general case, is (a 30 ms standstill was asked before; seed
+    # 278, hduc20 / stiction / sine:2.26:0.5, had none: stiction untestable, Stribeck
+    # friction named on the motor side; testable, stiction is named, gap cut 100 %)
     Effect("stiction", "breakaway",
            "stiction: breakaway torque above the running friction",
            _stick_params, _stick_on, _break_neutral, requires=("coulomb_friction",),
-           sized=_static_sized, seen=(SIMULATED, MOVING_OR_STOPS, STANDSTILL),
+           sized=_static_sized, seen=(SIMULATED, MOVING_OR_STOPS, LOW_SPEED),
            forms=(("kept_running", _stick_on_kept),),
            channels="breakaway events: held torque and the speed after each start",
            protocol="breakaway_ramps"),

@@ -36,7 +36,8 @@ residuals and untestable effects the diagnosis names the protocols (``hdgym expe
 whose records would decide (:func:`.outcome.judge`; a validation record that shows nothing
 above its noise does not judge, :func:`.outcome.judged_record`, and is set aside before the
 search). A search that names nothing and leaves the residual unexplained runs again with
-every candidate trial-refitted, then with the two records' roles swapped (:func:`diagnose`).
+every candidate trial-refitted, then with the two records' roles swapped; one that finds
+nothing missing must find it with the roles swapped too (:func:`diagnose`).
 """
 
 from __future__ import annotations
@@ -103,8 +104,10 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     """Compare ``params`` with ``record``, find, name and add the missing effects.
 
     The search runs on ``record`` and every effect it names must carry over to
-    ``validate`` (:func:`_one_way`). When it names nothing and the outcome is
-    *unexplained*, it runs twice more, at the same bars, until one names an effect:
+    ``validate`` (:func:`_one_way`). When it names nothing and finds nothing missing, the
+    search runs once more with the records' roles swapped, and nothing missing must hold
+    there too (:func:`_nothing_missing_both_ways`). When it names nothing and the outcome
+    is *unexplained*, it runs twice more, at the same bars, until one names an effect:
 
     * on the same records with every candidate trial-refitted, not only those that explain
       :data:`.search.MIN_SCORE` of the residual in a linearized refit (linearized at the
@@ -147,8 +150,11 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     kw = dict(mode=mode, threshold=threshold, max_steps=max_steps, quick=quick,
               cutoff=cutoff, segment=segment, fit_window=fit_window)
     first = _one_way(record, params, validate, **kw)
-    if (validate is None or first.validation is None or first.steps
-            or first.outcome != "unexplained"):
+    if validate is None or first.validation is None or first.steps:
+        return first
+    if first.outcome == "nothing missing":
+        return _nothing_missing_both_ways(first, record, params, validate, t0, kw)
+    if first.outcome != "unexplained":
         return first
     tried = []
     for searched, checked, gate, how in (
@@ -164,6 +170,35 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
         tried.append(f"again with {where} it reads {again.outcome}")
     return replace(first, seconds=_time.perf_counter() - t0,
                    conclusion="; ".join([first.conclusion, *tried]))
+
+
+def _nothing_missing_both_ways(first: Diagnosis, record: Record, params: JointParams,
+                               validate: Record, t0: float, kw: dict) -> Diagnosis:
+    """*Nothing missing* holds only when the search with the records' roles swapped (fitted
+    and searched on ``validate``, checked on ``record``) finds nothing missing too: which
+    run a user calls the training record is arbitrary, and the base fit on one can take up
+    an effect the other shows (fresh seed 278, hdf40 / stribeck_friction / sine:4.66:2:
+    0.017 % against the generating joint's 0.0053 %, within 3 x the noise NMSE; swapped,
+    Stribeck friction cut the cost by 18.7 % against the converged base model and the
+    outcome read *unexplained*). An effect the swapped search names is returned (as after
+    an unexplained first search); an *unexplained* swapped outcome makes the first one
+    *unexplained*, with the swapped search's next experiments. Ten development and blind
+    cases with nothing present read *nothing missing* both ways."""
+    how = "the records' roles swapped"
+    again = _one_way(validate, params, record, **kw, desc=f"diagnose again, {how}")
+    where = f"{how} (searched on {validate.source}, checked on {record.source})"
+    if again.steps:
+        return replace(again, seconds=_time.perf_counter() - t0, conclusion=(
+            f"searched on {record.source}, nothing was missing; again with {where}: "
+            + again.conclusion))
+    conclusion = f"{first.conclusion}; again with {where} it reads {again.outcome}"
+    if again.outcome == "nothing missing":
+        return replace(first, seconds=_time.perf_counter() - t0, conclusion=conclusion)
+    return replace(first, seconds=_time.perf_counter() - t0, conclusion=conclusion,
+                   outcome="unexplained", next_experiments=list(dict.fromkeys(
+                       first.next_experiments + again.next_experiments)),
+                   unexplained_channels={**first.unexplained_channels,
+                                         "swapped": f"with {where}: {again.outcome}"})
 
 
 def _one_way(record: Record, params: JointParams, validate: Record | None, *,
