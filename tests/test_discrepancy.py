@@ -83,8 +83,8 @@ def test_a_given_models_effects_are_refined_where_the_record_reaches_too_little_
     """A record too lightly loaded to name load-dependent friction still moves with the
     tooth friction a given model has: the base fit refines it, as it does a segmented
     spring below half the peak torque. An effect untestable for want of a kind of motion
-    (a locked output, no standstills) stays as given, as does one given as zero; an effect
-    a search adds must be testable."""
+    (a locked output, no reversal or standstill) stays as given, as does one given as zero;
+    an effect a search adds must be testable."""
     from hdgym.params import preset
 
     p = preset("hduc20")
@@ -100,7 +100,9 @@ def test_a_given_models_effects_are_refined_where_the_record_reaches_too_little_
     locked = dataclasses.replace(s, locked=True)
     assert not load.too_small(locked)
     assert "friction.tooth_mu" not in {fp.path for fp in model_params(p, locked, p)}
-    assert not REGISTRY["stiction"].testable(s) and not REGISTRY["stiction"].too_small(s)
+    one_way = dataclasses.replace(s, reversals=0)  # no reversal, no standstill
+    assert not REGISTRY["stiction"].testable(one_way)
+    assert not REGISTRY["stiction"].too_small(one_way)
     assert not load.too_small(dataclasses.replace(s, moving_torque_share=0.5))  # testable
     no_tooth = set_values(p, {"friction.tooth_mu": 0.0})
     assert "friction.tooth_mu" not in {fp.path for fp in model_params(no_tooth, s, no_tooth)}

@@ -37,14 +37,16 @@ def test_blind_and_other_cases_keep_the_preset() -> None:
     assert holdout.case_truth(other) == preset(other.preset)
 
 
-@pytest.mark.parametrize(("moving", "standstills", "seen"),
-                         [(0.5, 1, True), (0.1, 2, True), (0.01, 2, False), (0.5, 0, False)])
+@pytest.mark.parametrize(("moving", "standstills", "reversals", "seen"),
+                         [(0.5, 1, 2, True), (0.1, 2, 2, True), (0.01, 2, 2, False),
+                          (0.5, 0, 2, True), (0.5, 0, 0, False)])
 def test_stiction_is_seen_on_a_mostly_stuck_record(moving: float, standstills: int,
-                                                   seen: bool) -> None:
+                                                   reversals: int, seen: bool) -> None:
     """Stiction's evidence is its breakaways: a joint its friction holds most of the record
-    (moving in 2-20 % of it) shows them best, as it shows Coulomb friction."""
+    (moving in 2-20 % of it) shows them best, as it shows Coulomb friction; a moving joint
+    shows them at its reversals (it is held there) or standstills, not on a run one way."""
     s = Scales(torque=1.0, speed=1.0, torsion=1e-3, current=1.0, moving=moving,
-               standstills=standstills, reversals=2)
+               standstills=standstills, reversals=reversals)
     assert REGISTRY["stiction"].testable(s) is seen
 
 
