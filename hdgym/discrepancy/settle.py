@@ -178,8 +178,7 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     """
     fps = model_params(current.params, problem.scales, given)
     core = {fp.path: get_value(given, fp.path) for fp in core_params(given, problem.scales)}
-    base = reset_to(current.params, given,
-                    [fp.path for fp in model_params(given, problem.scales, given)])
+    base = _given_values(current.params, given, problem)
     # one round from each start, further rounds from the cheapest one first (each round is
     # one fit's budget: a diagnosis of a 60 s record has to stay under 60 s), and from the
     # others only when the first's refit is refused
@@ -236,24 +235,30 @@ def settle_named(problem: Problem, vprob: Problem | None, current: FitResult,
         return None
     two = TwoRecords(problem, vprob)
     fps = model_params(current.params, problem.scales, given)
-    reset = reset_to(current.params, given,
-                     [fp.path for fp in model_params(given, problem.scales, given)])
+    reset = _given_values(current.params, given, problem)
     starts = [current.params] + ([reset] if reset is not current.params else [])
     refits = [converge(two, q, fps, nfev, search=True) for q in starts]
     named = min(refits, key=lambda r: r.cost)
-    v_named = vprob.nmse(named.params)["mean"]
-    if not (named.cost < two.nmse(current.params)["mean"] / 100 and v_named < v_now):
+    v_named = vprob.nmse(named.params)
+    if not (named.cost < two.nmse(current.params)["mean"] / 100 and v_named["mean"] < v_now):
         return None
     base = converge(two, before.params, model_params(before.params, problem.scales, given),
                     nfev, search=True)
     if not base.cost < two.nmse(before.params)["mean"] / 100:
         base = before
+    v_base = vprob.nmse(base.params)
     # the effect must still earn its keep against the base model refitted alike
-    if not carries_over(vprob.nmse(base.params), vprob.nmse(named.params), vprob.names,
-                        gain)[0]:
+    if not carries_over(v_base, v_named, vprob.names, gain)[0]:
         return None
     return rescored(problem, named), rescored(problem, base), (
         f"; the final model and the base model refitted on the training and validation "
         f"records together (one setting of each model's own parameters for both): "
-        f"validation NMSE {v_now:.3g} -> {v_named:.3g} % with the effects named, base model "
-        f"{vprob.nmse(before.params)['mean']:.3g} -> {vprob.nmse(base.params)['mean']:.3g} %")
+        f"validation NMSE {v_now:.3g} -> {v_named['mean']:.3g} % with the effects named, "
+        f"base model {vprob.nmse(before.params)['mean']:.3g} -> {v_base['mean']:.3g} %")
+
+
+def _given_values(p: JointParams, given: JointParams, problem: Problem) -> JointParams:
+    """``p`` with every parameter the given model fits itself back at its given value (the
+    named effects' own kept): a start out of the valley the base fit moved into to mimic
+    them; ``p`` itself when that joint does not validate (:func:`.paths.reset_to`)."""
+    return reset_to(p, given, [fp.path for fp in model_params(given, problem.scales, given)])

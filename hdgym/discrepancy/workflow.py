@@ -159,17 +159,35 @@ def diagnose(record: Record, params: JointParams, validate: Record | None = None
     tried = []
     for searched, checked, gate, how in (
             (record, validate, 0.0, "every candidate trial-refitted"),
-            (validate, record, MIN_SCORE, "the records' roles swapped")):
-        again = _one_way(searched, params, checked, **kw, min_score=gate,
-                         desc=f"diagnose again, {how}")
-        where = f"{how} (searched on {searched.source}, checked on {checked.source})"
+            (validate, record, MIN_SCORE, SWAPPED)):
+        again, where = _search_again(searched, checked, params, kw, how, gate)
         if again.steps:
-            return replace(again, seconds=_time.perf_counter() - t0, conclusion=(
-                f"searched on {record.source}, nothing was named and the residual stayed "
-                f"unexplained; again with {where}: " + again.conclusion))
+            return _named_again(again, t0, record, "nothing was named and the residual "
+                                "stayed unexplained", where)
         tried.append(f"again with {where} it reads {again.outcome}")
     return replace(first, seconds=_time.perf_counter() - t0,
                    conclusion="; ".join([first.conclusion, *tried]))
+
+
+SWAPPED = "the records' roles swapped"
+"""How :func:`diagnose` names its search with the two records' roles swapped."""
+
+
+def _search_again(searched: Record, checked: Record, params: JointParams, kw: dict, how: str,
+                  min_score: float = MIN_SCORE) -> tuple[Diagnosis, str]:
+    """Another one-way search of :func:`diagnose` (``how`` names it in its progress bar and
+    the conclusion): its diagnosis, and where it searched and checked, in words."""
+    again = _one_way(searched, params, checked, **kw, min_score=min_score,
+                     desc=f"diagnose again, {how}")
+    return again, f"{how} (searched on {searched.source}, checked on {checked.source})"
+
+
+def _named_again(again: Diagnosis, t0: float, record: Record, first: str,
+                 where: str) -> Diagnosis:
+    """A later search's diagnosis that named an effect, its conclusion saying what the
+    first search on ``record`` read (``first``) and where the later one searched."""
+    return replace(again, seconds=_time.perf_counter() - t0, conclusion=(
+        f"searched on {record.source}, {first}; again with {where}: " + again.conclusion))
 
 
 def _nothing_missing_both_ways(first: Diagnosis, record: Record, params: JointParams,
@@ -184,13 +202,9 @@ def _nothing_missing_both_ways(first: Diagnosis, record: Record, params: JointPa
     an unexplained first search); an *unexplained* swapped outcome makes the first one
     *unexplained*, with the swapped search's next experiments. Ten development and blind
     cases with nothing present read *nothing missing* both ways."""
-    how = "the records' roles swapped"
-    again = _one_way(validate, params, record, **kw, desc=f"diagnose again, {how}")
-    where = f"{how} (searched on {validate.source}, checked on {record.source})"
+    again, where = _search_again(validate, record, params, kw, SWAPPED)
     if again.steps:
-        return replace(again, seconds=_time.perf_counter() - t0, conclusion=(
-            f"searched on {record.source}, nothing was missing; again with {where}: "
-            + again.conclusion))
+        return _named_again(again, t0, record, "nothing was missing", where)
     conclusion = f"{first.conclusion}; again with {where} it reads {again.outcome}"
     if again.outcome == "nothing missing":
         return replace(first, seconds=_time.perf_counter() - t0, conclusion=conclusion)
@@ -338,7 +352,6 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     if (before.nmse is not None and problem.segment != chosen
             and problem.compare == "time"):  # escalated: report on it
         before = rescored(problem, before)
-    where_before = _where(problem, before.params)
     if steps and not conclusion.startswith("stopped"):
         conclusion = (f"found {', '.join(s.name for s in steps)}; then " + conclusion)
     conclusion += why_judged
@@ -355,7 +368,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     if both is not None:  # validation NMSE before and after, each from a fit that saw it
         current, before, words = both
         conclusion += words
-        where_before = _where(problem, before.params)
+    where_before = _where(problem, before.params)
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
         candidates, untestable_why, params,
