@@ -256,3 +256,31 @@ def test_nothing_missing_needs_the_base_models_own_floor_too():
     assert outcome_of(["x"], final, noise, [], {}, base, {}, floor)[0] == (
         "named; rest unexplained")
     assert outcome_of(["x"], 1.5 * floor, noise, [], {}, base, {}, floor)[0] == "named"
+
+
+def test_nothing_missing_within_resolved_when_every_lacking_effect_is_untestable():
+    """With nothing named and every effect the base model lacks untestable on the record
+    (listed, with the experiment that would show it), a residual within RESOLVED is fit
+    slack as far as the record can tell, whatever the base model's floor (development seed
+    290, tuttle-joint1 / none / sine:1.9:2: 0.0281 %, noise 0.0073 %, floor 0.0076 %).
+    One testable effect left out keeps the floor rule; above RESOLVED it stays
+    unexplained; a named model is still judged on its floor."""
+    from hdgym.discrepancy.outcome import lacks_only_untestable, resolved
+    from hdgym.discrepancy.registry import REGISTRY
+
+    base = cases.case_joint()
+    noise, floor, final = 0.0073, 0.0076, 0.0281
+    lacking = [n for n in REGISTRY if n not in base.effects]
+    assert lacking
+    all_untestable = {n: "the record cannot show it" for n in lacking}
+    assert lacks_only_untestable(base, all_untestable)
+    assert not lacks_only_untestable(base, dict(list(all_untestable.items())[1:]))
+    assert not resolved(False, final, noise, floor)
+    assert resolved(False, final, noise, floor, untested_only=True)
+    assert not resolved(False, 2 * RESOLVED, noise, floor, untested_only=True)
+    assert outcome_of([], final, noise, [], all_untestable, base, {}, floor,
+                      True)[0] == "nothing missing"
+    assert outcome_of([], final, noise, [], all_untestable, base, {}, floor,
+                      False)[0] == "unexplained"
+    assert outcome_of(["x"], final, noise, [], all_untestable, base, {}, floor,
+                      True)[0] == "named; rest unexplained"

@@ -373,7 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         "it made itself, its own floor, `hdgym.discrepancy.floor.floor_nmse`), *named; rest "
         "unexplained* (above that), *nothing missing* (nothing named; final NMSE within 3 x "
         "the measurement-noise NMSE, `hdgym.discrepancy.noise`, or at most 0.5 % and within "
-        "2 x the base model's own floor, and every "
+        "2 x the base model's own floor (unless every effect it lacks is untestable), and every "
         "channel within 3 x its own noise NMSE or at most 0.5 %, "
         "`hdgym.discrepancy.outcome.noisy_channel_hides`) or "
         "*unexplained*; no channel alone may be above 3 x its floor and beyond what "

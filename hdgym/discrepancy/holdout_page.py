@@ -72,6 +72,7 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "nothing named, *nothing missing* when the final NMSE is within "
              f"{NOISE_FACTOR:g} x the measurement-noise NMSE (`hdgym.discrepancy.noise`), or at "
              f"most {RESOLVED:g} % and within {FLOOR_FACTOR:g} x the base model's own floor "
+             "(unless every effect the base model lacks is untestable on the record) "
              "(`NOISE_FACTOR`, `RESOLVED`, set on the tuned cases; `outcome.resolved`), and "
              "every channel within that factor of its own noise NMSE or at most "
              f"{RESOLVED:g} % (one noisy channel may not lend its noise to the others: "
