@@ -46,7 +46,7 @@ import time as _time
 from dataclasses import replace
 
 from hdgym.params import JointParams
-from hdgym.progress import bar
+from hdgym.progress import bar, step
 from hdgym.record import Record
 
 from . import residuals as R
@@ -357,14 +357,19 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     conclusion += why_judged
     untestable_why = noise_hidden(candidates, problem.noise["mean"], untestable_why)
     untestable = list(untestable_why)
-    # the polish after each effect had one fit's budget: the named model, converged
-    refit = converge_named(problem, vprob, current, params, nfev_base) if steps else None
-    if refit is not None:
-        conclusion += (f"; the final model refitted until it converged: NMSE "
-                       f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
-        current = refit
-    both = (settle_named(problem, vprob, current, before, params, nfev_base, VALIDATION_GAIN)
-            if steps else None)
+    both = None
+    if steps:  # the final refits take minutes on some records: a bar of their own
+        with bar(total=2, desc=f"{desc}: final refits", unit="fit") as fin:
+            # the polish after each effect had one fit's budget: the named model, converged
+            refit = converge_named(problem, vprob, current, params, nfev_base)
+            if refit is not None:
+                conclusion += (f"; the final model refitted until it converged: NMSE "
+                               f"{current.nmse['mean']:.3g} -> {refit.nmse['mean']:.3g} %")
+                current = refit
+            step(fin, "on both records")
+            both = settle_named(problem, vprob, current, before, params, nfev_base,
+                                VALIDATION_GAIN)
+            fin.update(1)
     if both is not None:  # validation NMSE before and after, each from a fit that saw it
         current, before, words = both
         conclusion += words
