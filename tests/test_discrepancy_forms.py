@@ -94,3 +94,38 @@ def test_the_trial_start_refines_every_shape_of_the_knee():
     assert cost <= min(alone) * (1 + 1e-9)
     # the knee found is the truth's, not the grid's best-looking one
     assert start.compliance.knee == pytest.approx(truth.compliance.knee, rel=0.2)
+
+
+def test_the_knee_form_also_starts_from_its_guess():
+    """At a knee off the truth's, the grid's cheapest extra stiffness is a small share of
+    the spring's and the trial fit from there stops in a valley of its own; the knee form's
+    switch-on guess is a start too, last, and the fit from it goes much further (development
+    seed 290, hduc20 / nonlinear_stiffness / sine:3.07:2, locked: a three-segment
+    spring)."""
+    from hdgym.discrepancy.fitting import fit
+    from hdgym.discrepancy.holdout import base_model, case_truth, holdout_cases, records
+    from hdgym.discrepancy.ranking import _form_starts
+    from hdgym.discrepancy.registry import model_params
+
+    case = next(c for c in holdout_cases(290)
+                if c.name.startswith("hduc20 / nonlinear_stiffness"))
+    truth = case_truth(case)
+    train, _ = records(case, truth)
+    given = base_model(case, truth)
+    prob = Problem(train, given, segment=0.5)
+    prob.set_compare("spring")
+    eff = REGISTRY["nonlinear_stiffness"]
+    guess = eff.switch_on(given, prob.scales, "knee")
+    starts = _form_starts(prob, given, "nonlinear_stiffness")
+    assert starts[-1] == guess and guess not in starts[:-1]
+    grid_knee = next(q for q in starts[:-1] if q.compliance.model == "two_segment")
+    assert grid_knee.compliance.extra_stiffness < 0.5 * guess.compliance.extra_stiffness
+
+    def fitted(q: JointParams) -> float:
+        return fit(prob, q, model_params(q, prob.scales, given), max_nfev=45,
+                   central=True).cost
+
+    assert fitted(guess) < 0.2 * fitted(grid_knee)
+    # a base model whose spring already has a knee gets no extra start for other effects
+    assert all(q.compliance.model != "two_segment" for q in _form_starts(prob, given,
+                                                                         "hysteresis"))

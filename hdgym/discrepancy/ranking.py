@@ -199,11 +199,11 @@ def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParam
 
     A spring's knee form also starts, last, from its switch-on guess (knee at 0.3 x the
     record's torsion, extra stiffness the spring's own): at a knee off the truth's the
-    grid's cheapest extra stiffness is near zero, and the trial fit from there stops in a
-    valley of its own (development seed 290, hduc20 / nonlinear_stiffness / sine:3.07:2,
-    locked: from the grid's start, knee 7.6e-4 rad and 2.9e2 N m/rad, it stopped at 0.139 %
-    NMSE on the spring curve; from the guess it reached the true knee, 2.06e-3 rad, at
-    0.0019 %, validation 0.0077 % against 0.5 %)."""
+    grid's cheapest extra stiffness is a small share of the spring's, and the trial fit from
+    there stops in a valley of its own (development seed 290, hduc20 / nonlinear_stiffness /
+    sine:3.07:2, locked: from the grid's start, knee 7.6e-4 rad and 2.9e2 N m/rad, it
+    stopped at 0.139 % NMSE on the spring curve; from the guess it reached the true knee,
+    2.06e-3 rad, at 0.0019 %, validation 0.0077 % against 0.5 %)."""
     eff = REGISTRY[name]
     starts = [_start_form(problem, p, name, form) for form in eff.form_names()]
     out: list[JointParams] = []
@@ -216,7 +216,6 @@ def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParam
         if knee and q not in out:
             out.append(q)
     return out
-
 
 
 SHAPE_GRID = (0.02, 0.1, 0.4)
