@@ -210,7 +210,7 @@ def _form_starts(problem: Problem, p: JointParams, name: str) -> list[JointParam
     for q, _ in sorted(starts, key=lambda s: s[1]):
         if q not in out:  # (forms can meet: stiction's two where the record has no levels)
             out.append(q)
-    for form in eff.form_names():  # a knee's own guess too, after the grid's starts
+    for form, _ in eff.forms:  # a knee's own guess too, after the grid's starts
         q = eff.switch_on(p, problem.scales, form)
         knee = q.compliance.model == "two_segment" != p.compliance.model  # (switched on)
         if knee and q not in out:
