@@ -8,10 +8,10 @@ import numpy as np
 
 from hdgym.params import JointParams
 
-from .effect import FitParam
+from .effect import FitParam, Scales
 from .floor import floor_nmse, unexplained_channels
 from .problem import Problem
-from .registry import REGISTRY
+from .registry import REGISTRY, lacking
 
 RESOLVED = 0.5
 """NMSE, percent, at or below which a residual counts as resolved when no effect is named:
@@ -197,17 +197,26 @@ def resolved(named: bool, final: float, noise: float, floor: float | None,
     return final <= RESOLVED and (not known or untested_only or at_floor(final, floor))
 
 
-def lacks_only_untestable(p: JointParams, untestable_why: dict[str, str]) -> bool:
-    """Whether every effect of the registry that ``p`` lacks is untestable on the record
-    (a key of ``untestable_why``): nothing the record can show is left to name."""
-    return all(n in untestable_why for n in REGISTRY if n not in p.effects)
+def _lacked(p: JointParams, scales: Scales | None) -> list[str]:
+    """The effects ``p`` lacks: :func:`.registry.lacking` on the record's ``scales``, or by
+    the switch alone without them."""
+    return lacking(p, scales) if scales is not None else [n for n in REGISTRY
+                                                          if n not in p.effects]
+
+
+def lacks_only_untestable(p: JointParams, untestable_why: dict[str, str],
+                          scales: Scales | None = None) -> bool:
+    """Whether every effect of the registry that ``p`` lacks (:func:`_lacked`) is
+    untestable on the record (a key of ``untestable_why``): nothing the record can show is
+    left to name."""
+    return all(n in untestable_why for n in _lacked(p, scales))
 
 
 def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
                untestable_why: dict[str, str], given: JointParams,
                channels_unexplained: dict[str, str] | None = None,
-               floor: float | None = None, untested_only: bool = False
-               ) -> tuple[str, list[str]]:
+               floor: float | None = None, untested_only: bool = False, *,
+               scales: Scales | None = None) -> tuple[str, list[str]]:
     """The honest outcome and the experiments that would decide what this record cannot.
 
     Args:
@@ -218,7 +227,8 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
         (:func:`.floor.unexplained_channels`; channel -> why); floor: the final model's
         comparison floor, mean NMSE percent (:func:`.floor.floor_nmse`; None: unknown);
         untested_only: every effect the model lacks is untestable on the record
-        (:func:`resolved`).
+        (:func:`resolved`); scales: the record's, to tell what the base model lacks
+        (:func:`_lacked`).
 
     *named* when an effect was added (each had to cut the gap) and what remains is at the
     final model's own floor (:func:`at_floor`; without a floor, at the noise level as
@@ -240,7 +250,8 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
         outcome = "nothing missing"
     else:
         outcome = "unexplained"
-    names = [n for n in untestable_why if n not in given.effects]
+    lacked = _lacked(given, scales)
+    names = [n for n in untestable_why if n in lacked]
     if outcome.endswith("unexplained"):
         names = [c["name"] for c in candidates[:2]] + names
     protocols = list(dict.fromkeys(REGISTRY[n].protocol for n in names if REGISTRY[n].protocol))
@@ -267,7 +278,7 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
     fl = floor_nmse(judged, p)
     floor = _channel_mean(fl)  # mean_floor, with the channels kept for the checks below
     stuck = dict(stuck)
-    untested_only = lacks_only_untestable(p, untestable_why)
+    untested_only = lacks_only_untestable(p, untestable_why, judged.scales)
     # the mean can hide one channel that alone shows what the model lacks
     if resolved(bool(steps), final, judged.noise["mean"], floor, untested_only):
         stuck |= unexplained_channels(judged, p, fps, final_channels, NOISE_FACTOR, fl)
@@ -278,7 +289,8 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
         if gap is not None:
             stuck["validation"] = gap
     outcome, nexts = outcome_of(steps, final, judged.noise["mean"], candidates,
-                                untestable_why, given, stuck, floor, untested_only)
+                                untestable_why, given, stuck, floor, untested_only,
+                                scales=judged.scales)
     return outcome, nexts, stuck, floor
 
 

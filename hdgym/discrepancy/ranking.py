@@ -21,7 +21,7 @@ from . import friction_fit as FF
 from . import residuals as R
 from .paths import get_value, set_values
 from .problem import Problem
-from .registry import REGISTRY, model_params
+from .registry import REGISTRY, lacks, model_params
 
 SIZED_GRID = (0.7, 0.85, 1.0, 1.2, 1.4)
 """Factors on the record's sizes (an effect's ``sized``) tried as trial starts."""
@@ -133,11 +133,11 @@ def rank_candidates(problem: Problem, current: JointParams,
                  if base_cols else 0.0)
     out = []
     for name, eff in REGISTRY.items():
-        if name in current.effects or not eff.testable(problem.scales):
+        if not lacks(current, name, problem.scales) or not eff.testable(problem.scales):
             continue
         if problem.compare not in eff.compare:  # (the spring curve shows only the spring)
             continue
-        if any(req not in current.effects for req in eff.requires):
+        if any(lacks(current, req, problem.scales) for req in eff.requires):
             continue
         sig = (R.signature(eff.signature, res, w, ctx) if problem.compare != "lines"
                else {"kind": eff.signature, "explained": 0.0})  # (coefficients: no samples)

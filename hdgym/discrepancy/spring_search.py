@@ -19,7 +19,7 @@ from .fitting import FitResult, fit, rescored
 from .floor import curve_unexplained
 from .outcome import NOISE_FACTOR
 from .problem import Problem
-from .registry import REGISTRY, model_params
+from .registry import REGISTRY, lacks, model_params
 
 
 def views(problem: Problem, p: JointParams) -> tuple[str, ...]:
@@ -32,7 +32,7 @@ def views(problem: Problem, p: JointParams) -> tuple[str, ...]:
     if problem.locked:
         return ("spring",)
     missing = [n for n, e in REGISTRY.items() if "lines" in e.compare
-               and n not in p.effects and e.testable(problem.scales)]
+               and lacks(p, n, problem.scales) and e.testable(problem.scales)]
     return ("lines",) if missing and problem.line_channels() is not None else ()
 
 
