@@ -278,3 +278,47 @@ def test_settle_named_refits_named_and_base_model_on_both_records(monkeypatch):
     assert S.settle_named(train, rest, cur, before, given, 20, 0.1) is not None
     val.floor = v0  # at its own floor: named, nothing to settle
     assert S.settle_named(train, val, cur, before, given, 20, 0.1) is None
+
+
+class _Horizon(_Valley):
+    """:class:`_Valley` compared on a horizon: on a short one (50 ms or less) the false
+    minimum is gone, as when a parameter error has less time to build up in a segment."""
+
+    compare = "time"
+
+    def __init__(self, *a, segment=0.2, **kw):
+        super().__init__(*a, **kw)
+        self.segment = segment
+
+    def vector(self, p, decimate=1):
+        if self.segment > S.SHORT_HORIZON:
+            return super().vector(p, decimate)
+        x = get_value(p, PATHS[1]) / get_value(self.truth, PATHS[1])
+        e = get_value(p, PATHS[0]) / get_value(self.truth, PATHS[0]) - 1
+        return np.array([x - 1, e])
+
+
+def test_converge_named_also_starts_from_a_shorter_horizon(monkeypatch):
+    """With no given value to go back to, the refit stays in the false valley on the
+    record's horizon; refitted on the short horizon first, it reaches the true minimum,
+    and the problem is compared on its own horizon again afterwards."""
+    truth = preset("tuttle-joint3")
+    fps = _fps(truth)
+    monkeypatch.setattr(S, "core_params", lambda p, scales: [])
+    monkeypatch.setattr(S, "model_params",
+                        lambda p, scales, given: [] if p is given else fps)
+    train = _Horizon(truth, np.zeros((2, 2)))
+    moved = _start(truth, 1.1, 1.75)
+    assert S.converge(train, moved, fps, 20).cost > 1e-3
+    current = FitResult(moved, {}, train.nmse(moved), 0, train.nmse(moved)["mean"] / 100)
+    out = S.converge_named(train, None, current, truth, 20)
+    assert train.segment == 0.2
+    assert out is not None and out.cost < 1e-6
+    assert get_value(out.params, PATHS[1]) == pytest.approx(get_value(truth, PATHS[1]),
+                                                            rel=1e-3)
+    # no shorter start where the record is compared at 50 ms already, or not in time
+    assert S.short_start(_Horizon(truth, np.zeros((2, 2)), segment=0.05), moved, fps,
+                         20) is None
+    assert S.short_start(train, moved, fps, 20) is not None
+    monkeypatch.setattr(train, "compare", "spring")
+    assert S.short_start(train, moved, fps, 20) is None
