@@ -150,3 +150,24 @@ def test_a_motor_that_never_moves_gives_no_motion_channel():
     moving = Simulator(p).run("step:0.30", 1.0, seed=1)
     raw = R.Raw(np.asarray(moving.motor_angle), np.asarray(moving.output_angle))
     assert N.pick_channels(raw, False, *args)[0] == "motor_speed"
+
+
+def test_ringing_above_the_band_is_not_read_as_noise():
+    """A stick-slip torque rings at each slip far above the channel filter's band: the third
+    differences read that ringing as noise, the spectrum's floor does not, and
+    :func:`white_sigma` keeps the lower reading (white noise alone reads alike on both)."""
+    rng = np.random.default_rng(5)
+    n = 6000
+    t = np.arange(n) * DT
+    ring = np.zeros(n)
+    for t0 in np.sort(rng.uniform(0.1, 5.9, 40)):  # a slip every 150 ms: 200 Hz, 20 ms decay
+        after = t >= t0
+        ring[after] += 0.4 * np.exp(-(t[after] - t0) / 0.02) * np.sin(
+            2 * math.pi * 200.0 * (t[after] - t0))
+    sigma = 0.002
+    x = 0.3 * np.sin(2 * math.pi * 0.5 * t) + ring + rng.normal(0.0, sigma, n)
+    assert N.difference_sigma(x) > 1.5 * sigma  # the ringing read as noise
+    assert abs(N.white_sigma(x) / sigma - 1.0) < 0.25, N.white_sigma(x) / sigma
+    e = rng.normal(0.0, sigma, n)
+    for est in (N.difference_sigma, N.spectral_sigma, N.white_sigma):
+        assert abs(est(e) / sigma - 1.0) < 0.1, est.__name__
