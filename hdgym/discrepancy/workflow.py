@@ -56,15 +56,19 @@ from .floor import CURVE_SHARE
 from .outcome import (
     judge,
     judged_record,
+    mean_floor,
     noise_hidden,
     partial_evidence,
+    resolved,
 )
 from .paths import get_value
+from .pooled import pooled_candidate, pooled_words
 from .problem import HORIZONS, Problem
 from .ranking import _weighted
 from .registry import REGISTRY, model_params
 from .search import (
     ESCALATED_GAIN,
+    MIN_GAIN,
     MIN_SCORE,
     NEAR,
     THRESHOLD,
@@ -178,7 +182,7 @@ def _search_again(searched: Record, checked: Record, params: JointParams, kw: di
     """Another one-way search of :func:`diagnose` (``how`` names it in its progress bar and
     the conclusion): its diagnosis, and where it searched and checked, in words."""
     again = _one_way(searched, params, checked, **kw, min_score=min_score,
-                     desc=f"diagnose again, {how}")
+                     desc=f"diagnose again, {how}", pooled=False)
     return again, f"{how} (searched on {searched.source}, checked on {checked.source})"
 
 
@@ -218,11 +222,15 @@ def _nothing_missing_both_ways(first: Diagnosis, record: Record, params: JointPa
 def _one_way(record: Record, params: JointParams, validate: Record | None, *,
              mode: str, threshold: float, max_steps: int, quick: bool, cutoff: float | None,
              segment: float | str | None, fit_window: float | None,
-             min_score: float = MIN_SCORE, desc: str = "diagnose") -> Diagnosis:
+             min_score: float = MIN_SCORE, desc: str = "diagnose",
+             pooled: bool = True) -> Diagnosis:
     """:func:`diagnose` with ``record`` searched and ``validate`` the check (arguments as
     there; ``min_score``: the least share of the residual a linearized refit must explain
     for any trial refit, :func:`.search.search_round`; ``desc``: the progress bar's
-    label)."""
+    label; ``pooled``: with nothing named and the validation residual not resolved, the
+    candidates that passed the training record's bar are judged on both records fitted
+    together, :func:`.pooled.pooled_candidate`; the later searches of :func:`diagnose`
+    skip it, the first one ran it on the same two records)."""
     t0 = _time.perf_counter()
     full = None
     if fit_window and record.duration > fit_window * 1.001:
@@ -307,26 +315,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
             conclusion = reason
             break
         best, polished, rel = accepted
-        eff = REGISTRY[best["name"]]
-        values = {fp.path: get_value(polished.params, fp.path)
-                  for fp in eff.fit_params(polished.params, problem.scales)}
-        for path in [k for k in values if k.endswith(".sin")]:  # also as amplitude and phase
-            item = path[: -len(".sin")]
-            values[item + ".amplitude"] = get_value(polished.params, item + ".amplitude")
-            values[item + ".phase"] = get_value(polished.params, item + ".phase")
-            values[item + ".order"] = get_value(polished.params, item + ".order")
-            if item.startswith("kinematic_error."):  # the line's order of the WG angle
-                h = polished.params.kinematic_error.harmonics[int(item.split("[")[1][:-1])]
-                values[item + ".wg_order"] = (
-                    h.order * polished.params.transmission.port_factor(h.port))
-        evidence = {"signature": best["signature"], "detail": best["detail"],
-                    "signature_explained": best["signature_explained"],
-                    "sensitivity_explained": best["sensitivity_explained"],
-                    "relative_improvement": round(rel, 4)}
-        steps.append(Step(best["name"], evidence, values, polished.nmse,
-                          _validate_nmse(vprob, polished.params),
-                          (current.cost - polished.cost) / current.cost, candidates,
-                          polished.params))
+        steps.append(_step(problem, vprob, current, best, polished, rel, candidates))
         current = polished
         if auto and not problem.inverse and not escalated:
             # the horizon again, with the model that now has the effect: the base model may
@@ -348,6 +337,19 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         current, conclusion, alone = settle(problem, vprob, current, params, nfev_base, auto,
                                             conclusion, _choose_horizon, both=not partly)
         before = current
+        if (pooled and vprob is not None and problem.compare == "time"
+                and not resolved(False, vprob.nmse(current.params)["mean"],
+                                 vprob.noise["mean"], mean_floor(vprob, current.params))):
+            # what passed the training record's bar, judged on both records fitted together
+            found_p = pooled_candidate(problem, vprob, current, params, base_paths, candidates,
+                                       threshold, MIN_GAIN, VALIDATION_GAIN, nfev_polish)
+            if found_p is not None:
+                cand, named, before, rel, why = found_p
+                steps.append(_step(problem, vprob, before, cand, named, rel, candidates))
+                current = named
+                conclusion += "; named on both records: " + why
+            else:
+                conclusion += pooled_words(candidates)
     prog.close()
     if (before.nmse is not None and problem.segment != chosen
             and problem.compare == "time"):  # escalated: report on it
@@ -399,6 +401,31 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                                                                  before.params),
         nmse_record_after=None if full is None else _full_nmse(full, params, problem,
                                                                current.params))
+
+
+def _step(problem: Problem, vprob: Problem | None, current: FitResult, best: dict,
+          polished: FitResult, rel: float, candidates: list[dict]) -> Step:
+    """The :class:`.diagnosis.Step` of candidate ``best`` named with the fit ``polished``
+    (``rel``: its relative cut of the cost), from the model ``current``."""
+    eff = REGISTRY[best["name"]]
+    values = {fp.path: get_value(polished.params, fp.path)
+              for fp in eff.fit_params(polished.params, problem.scales)}
+    for path in [k for k in values if k.endswith(".sin")]:  # also as amplitude and phase
+        item = path[: -len(".sin")]
+        values[item + ".amplitude"] = get_value(polished.params, item + ".amplitude")
+        values[item + ".phase"] = get_value(polished.params, item + ".phase")
+        values[item + ".order"] = get_value(polished.params, item + ".order")
+        if item.startswith("kinematic_error."):  # the line's order of the WG angle
+            h = polished.params.kinematic_error.harmonics[int(item.split("[")[1][:-1])]
+            values[item + ".wg_order"] = (
+                h.order * polished.params.transmission.port_factor(h.port))
+    evidence = {"signature": best["signature"], "detail": best["detail"],
+                "signature_explained": best["signature_explained"],
+                "sensitivity_explained": best["sensitivity_explained"],
+                "relative_improvement": round(rel, 4)}
+    return Step(best["name"], evidence, values, polished.nmse,
+                _validate_nmse(vprob, polished.params),
+                (current.cost - polished.cost) / current.cost, candidates, polished.params)
 
 
 def _validate_nmse(vp: Problem | None, p: JointParams) -> dict[str, float] | None:
