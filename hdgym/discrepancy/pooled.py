@@ -7,9 +7,10 @@ effect there and the effect, refitted from that valley, carries over poorly: the
 names nothing although one setting of the base model plus the effect fits both records and
 the base model alone fits neither. :func:`.settle.settle` already refits the base model on
 both records before it would call the residual *unexplained*; :func:`pooled_candidate`
-refits the candidates that passed the training record's bar the same way and names the one
-that cuts the cost of both records together by the search's own threshold against that
-base refit and carries over record by record.
+refits the candidates whose trial refit reached half the training record's bar
+(:data:`POOLED_NEAR`) the same way, and names the one that cuts the cost of both records
+together by the search's own threshold against that base refit and carries over record by
+record.
 
 Development seed 302, hdf40 / viscous_friction / sine:3.09:2 (a 0.31 % effect on the
 training record, 3.4 % on the validation record, no torsion channel on the first): viscous
@@ -19,7 +20,8 @@ Refitted on both records it cut their cost by 98.7 % against the base model refi
 validation NMSE 0.117 -> 0.0017 %, the joint that made the records 0.0019 %. Two
 development cases with stiction hidden that read *unexplained* stay so (wave-drive-50 /
 stiction / random:0.283:4, seed 302: stiction's trial refit qualified, and refitted on both
-records cut their cost by 13 %; hdf40 / stiction / sine:4.41:1, seed 290: no trial refit qualified).
+records cut their cost by 13 %; hdf40 / stiction / sine:4.41:1, seed 290: no trial refit
+qualified).
 """
 
 from __future__ import annotations

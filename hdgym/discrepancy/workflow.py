@@ -228,9 +228,9 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     there; ``min_score``: the least share of the residual a linearized refit must explain
     for any trial refit, :func:`.search.search_round`; ``desc``: the progress bar's
     label; ``pooled``: with nothing named and the validation residual not resolved, the
-    candidates that passed the training record's bar are judged on both records fitted
-    together, :func:`.pooled.pooled_candidate`; the later searches of :func:`diagnose`
-    skip it, the first one ran it on the same two records)."""
+    candidates whose trial refit reached half the training record's bar are judged on both
+    records fitted together, :func:`.pooled.pooled_candidate`; the later searches of
+    :func:`diagnose` skip it, the first one ran it on the same two records)."""
     t0 = _time.perf_counter()
     full = None
     if fit_window and record.duration > fit_window * 1.001:
@@ -340,7 +340,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         if (pooled and vprob is not None and problem.compare == "time"
                 and not resolved(False, vprob.nmse(current.params)["mean"],
                                  vprob.noise["mean"], mean_floor(vprob, current.params))):
-            # what passed the training record's bar, judged on both records fitted together
+            # what came near the training record's bar, judged on both records fitted together
             found_p = pooled_candidate(problem, vprob, current, params, base_paths, candidates,
                                        threshold, MIN_GAIN, VALIDATION_GAIN, nfev_polish)
             if found_p is not None:
