@@ -6,7 +6,7 @@ import numpy as np
 
 from hdgym.discrepancy import pooled as P
 from hdgym.discrepancy.effect import FitParam
-from hdgym.discrepancy.fitting import FitResult, fit
+from hdgym.discrepancy.fitting import fit
 from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.params import preset
 
@@ -46,9 +46,13 @@ class _Record:
         return out
 
 
+def _base_fps(truth):
+    return [FitParam(k, 0.5 * get_value(truth, k), 2.0 * get_value(truth, k)) for k in BASE]
+
+
 def _patch(monkeypatch, truth):
     def fps(p, scales, given):
-        out = [FitParam(k, 0.5 * get_value(truth, k), 2.0 * get_value(truth, k)) for k in BASE]
+        out = _base_fps(truth)
         if get_value(p, EFFECT) > 0:  # the effect switched on
             out.append(FitParam(EFFECT, 0.0, 2.0))
         return out
@@ -61,9 +65,7 @@ def _base_fit(train, truth):
     """The base model (no effect) fitted to the training record alone: in its valley."""
     p0 = set_values(truth, {EFFECT: 0.0, BASE[0]: 1.1 * get_value(truth, BASE[0]),
                             BASE[1]: 0.95 * get_value(truth, BASE[1])})
-    fps = [FitParam(k, 0.5 * get_value(truth, k), 2.0 * get_value(truth, k)) for k in BASE]
-    r = fit(train, p0, fps, max_nfev=200, central=True)
-    return FitResult(r.params, r.values, r.nmse, r.nfev, r.cost)
+    return fit(train, p0, _base_fps(truth), max_nfev=200, central=True)
 
 
 def test_an_effect_the_training_record_lets_the_base_model_mimic_is_named_on_both(

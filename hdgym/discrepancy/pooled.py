@@ -75,9 +75,9 @@ def pooled_candidate(problem: Problem, vprob: Problem, current: FitResult,
     two = TwoRecords(problem, vprob)
     base = converge(two, current.params, model_params(current.params, problem.scales, given),
                     nfev, search=True)
-    if not base.cost < two.nmse(current.params)["mean"] / 100:
-        base = FitResult(current.params, current.values, two.nmse(current.params),
-                         0, two.nmse(current.params)["mean"] / 100)
+    at = two.nmse(current.params)  # (both records simulated once)
+    if not base.cost < at["mean"] / 100:
+        base = FitResult(current.params, current.values, at, 0, at["mean"] / 100)
     reset = reset_to(base.params, given, base_paths)
     parts = (problem, vprob)
     b_nm = [q.nmse(base.params) for q in parts]

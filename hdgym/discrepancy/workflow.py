@@ -341,6 +341,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                 and not resolved(False, vprob.nmse(current.params)["mean"],
                                  vprob.noise["mean"], mean_floor(vprob, current.params))):
             # what came near the training record's bar, judged on both records fitted together
+            prog.set_postfix_str("candidates refitted on both records")
             found_p = pooled_candidate(problem, vprob, current, params, base_paths, candidates,
                                        threshold, MIN_GAIN, VALIDATION_GAIN, nfev_polish)
             if found_p is not None:
