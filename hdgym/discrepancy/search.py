@@ -16,7 +16,7 @@ from .paths import reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, rank_candidates
 from .registry import model_params
-from .settle import converge
+from .settle import converge, short_start
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -133,6 +133,12 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                              simpler_forms(trials[0][2].params), nfev_trial)
         trials[0] = better_on_validation(vprob, trials[0], forms) or trials[0]
     accepted = ctrl = v_now = None  # (the control polish and validation NMSE: once)
+    # strong: the control converged from a shorter horizon beat it (None: not yet tried).
+    # Development seed 314, hdf40 / stiction / random:2.63:2, the records' roles swapped
+    # (stiction not present): the base fit stood at 0.169 % training NMSE and its control
+    # converged to 0.0254 %, stiction's polish to 0.0143 % (a 44 % cut: named); from 0.05 s
+    # first the base model reached 0.0134 % (the joint that made the record: 0.0105 %)
+    strong: bool | None = None
     reasons = []
     for _, best, res in trials:  # the best candidate that passes every check
         rel = best["relative_improvement"]
@@ -160,6 +166,19 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                                 model_params(current.params, problem.scales, params),
                                 nfev_polish)
         rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
+        if strong is None and not (ctrl.cost < current.cost and rel_ctrl < threshold):
+            # about to pass: the effect must beat the base model's best fit, not one stopped
+            # in a local minimum its extra parameters lead out of; converged from a fit on
+            # a shorter horizon too (once)
+            alt = _short_fit(problem, current.params, params, nfev_polish)
+            strong = alt is not None and alt.cost < ctrl.cost
+            ctrl = alt if strong else ctrl
+        if strong:
+            rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
+            if rel_ctrl < threshold:  # the candidate from the same start (fitted alike)
+                alt = _short_fit(problem, polished.params, params, nfev_polish)
+                polished = alt if alt is not None and alt.cost < polished.cost else polished
+                rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
         if ctrl.cost < current.cost and rel_ctrl < threshold:
             if vprob is not None and rel_ctrl >= VALIDATION_GAIN:  # partial evidence?
                 v_now = v_now or vprob.nmse(ctrl.params)
@@ -195,6 +214,16 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
     if accepted is None:
         return None, "nothing (more) worth adding: " + "; ".join(reasons), candidates
     return accepted, "", candidates
+
+
+def _short_fit(problem: Problem, p: JointParams, params: JointParams,
+               nfev: int) -> FitResult | None:
+    """``p`` converged on the record's horizon from a fit on a shorter one first
+    (:func:`.settle.short_start`; None where the comparison has no horizon to shorten)."""
+    start = short_start(problem, p, model_params(p, problem.scales, params), nfev)
+    if start is None:
+        return None
+    return converge(problem, start, model_params(start, problem.scales, params), nfev)
 
 
 def escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,
