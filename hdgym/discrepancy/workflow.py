@@ -12,12 +12,13 @@
    most, and add it if the relative improvement is at least
    :data:`THRESHOLD` (and the mean NMSE falls by at least :data:`MIN_GAIN`
    percentage points; polished, also against the base model polished alike, both refitted
-   until they converge; before an effect is named a trial within :data:`NEAR` of the
-   threshold is judged polished), and, when a validation record is given, if it also lowers
-   the validation NMSE by :data:`VALIDATION_GAIN` per channel and its mean (against that
-   control where it fits the training record better). Repeat until no
-   candidate passes; then say that nothing (more) is missing rather than
-   invent an effect.
+   until they converge, the base model also from a fit on a shorter horizon first, the
+   candidate too where that start takes it below the bar; before an effect is named a trial
+   within :data:`NEAR` of the threshold is judged polished), and, when a validation record
+   is given, if it also lowers the validation NMSE by :data:`VALIDATION_GAIN` per channel
+   and its mean (against that control where it fits the training record better). Repeat
+   until no candidate passes; then say that nothing (more) is missing rather than invent
+   an effect.
 
 NMSE (seed 002, percent) is reported before (base model fitted), after each
 step and on a validation record when one is given.
