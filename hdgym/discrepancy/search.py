@@ -165,7 +165,7 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
         ctrl = ctrl or converge(problem, current.params,
                                 model_params(current.params, problem.scales, params),
                                 nfev_polish)
-        rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
+        rel_ctrl = _cut(ctrl, polished.cost)
         if strong is None and not (ctrl.cost < current.cost and rel_ctrl < threshold):
             # about to pass: the effect must beat the base model's best fit, not one stopped
             # in a local minimum its extra parameters lead out of; converged from a fit on
@@ -173,12 +173,11 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
             alt = _short_fit(problem, current.params, params, nfev_polish)
             strong = alt is not None and alt.cost < ctrl.cost
             ctrl = alt if strong else ctrl
-        if strong:
-            rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
-            if rel_ctrl < threshold:  # the candidate from the same start (fitted alike)
-                alt = _short_fit(problem, polished.params, params, nfev_polish)
-                polished = alt if alt is not None and alt.cost < polished.cost else polished
-                rel_ctrl = (ctrl.cost - polished.cost) / ctrl.cost if ctrl.cost > 0 else 0.0
+            rel_ctrl = _cut(ctrl, polished.cost)
+        if strong and rel_ctrl < threshold:  # the candidate from the same start (fitted alike)
+            alt = _short_fit(problem, polished.params, params, nfev_polish)
+            polished = alt if alt is not None and alt.cost < polished.cost else polished
+            rel_ctrl = _cut(ctrl, polished.cost)
         if ctrl.cost < current.cost and rel_ctrl < threshold:
             if vprob is not None and rel_ctrl >= VALIDATION_GAIN:  # partial evidence?
                 v_now = v_now or vprob.nmse(ctrl.params)
