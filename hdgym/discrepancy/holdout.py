@@ -135,13 +135,13 @@ DEVELOPMENT_SEEDS = (14, 26, 38, 50, 62, 74, 86, 98, 110, 122, 134, 146, 158, 17
                      206, 218, 230, 242, 254, 266, 278, 290, 302, 314, 326)
 """Hold-out sets whose failing cases were run one by one while the workflow was changed
 (14-110 by 12, each after its first page, on 2026-11-26; 122-206 on 2026-11-27; 230-302 on
-2026-11-28; 314 on 2026-12-01; 326 on 2026-12-02), or that judged two pages and then saw the case construction
-change (158: the effect size measured against what the base model lacks, :func:`hidden_off`,
-which relabels its stiction cases): no longer untouched. (The stiction cases of 98-194 were
-run again when :func:`case_truth` took Stribeck friction out of their truth.) Seed 218
-judged one page and none of its cases was run after it; it moved here because that page
-listed its misses and the fits changed after it (:func:`.fitting.fit`'s pass on the mean
-reading)."""
+2026-11-28; 314 on 2026-12-01; 326 on 2026-12-02), or that judged two pages and then saw
+the case construction change (158: the effect size measured against what the base model
+lacks, :func:`hidden_off`, which relabels its stiction cases): no longer untouched. (The
+stiction cases of 98-194 were run again when :func:`case_truth` took Stribeck friction out
+of their truth.) Seed 218 judged one page and none of its cases was run after it; it moved
+here because that page listed its misses and the fits changed after it
+(:func:`.fitting.fit`'s pass on the mean reading)."""
 PAGE_DEVELOPMENT_SEEDS = (326,)
 """Development sets the page reports (the latest; the others: ``--seed``)."""
 FRESH_SEED = 338
