@@ -40,6 +40,7 @@ def test_the_polish_and_its_control_both_converge(monkeypatch, compare):
         return current if q is current.params else trial  # (the control gains nothing)
 
     monkeypatch.setattr(W, "converge", converge)
+    monkeypatch.setattr(W, "short_converge", lambda *a, **k: None)  # no horizon to shorten
     monkeypatch.setattr(W, "fit", lambda *a, **k: pytest.fail("a single fit judged"))
     accepted, _, _ = W.search_round(_Problem(compare), None, current, p, [], 0.4, 10, 20)
     assert accepted is not None
@@ -55,6 +56,7 @@ def _one_candidate(monkeypatch, cand: dict, trial: FitResult, fit) -> None:
     monkeypatch.setattr(W, "model_params", lambda *a, **k: [])
     monkeypatch.setattr(W, "fit", fit)
     monkeypatch.setattr(W, "converge", fit)
+    monkeypatch.setattr(W, "short_converge", lambda *a, **k: None)  # no horizon to shorten
 
 
 def test_a_candidate_short_of_the_escalated_cut_is_marked(monkeypatch):
@@ -232,7 +234,7 @@ class _Timed(_Problem):
 
 def test_a_candidate_must_beat_the_base_model_from_a_shorter_horizon_too(monkeypatch):
     """Before a candidate is named, the base model is also converged from a fit on a shorter
-    horizon first (:func:`.settle.short_start`): a base fit stuck in a local minimum that
+    horizon first (:func:`.settle.short_converge`): a base fit stuck in a local minimum that
     the candidate's extra parameters lead out of credits the effect with the way out
     (development seed 314, hdf40 / stiction / random:2.63:2, swapped: named at a 44 % cut,
     14 % against the base model from 0.05 s). The candidate gets the same start; when
@@ -248,11 +250,11 @@ def test_a_candidate_must_beat_the_base_model_from_a_shorter_horizon_too(monkeyp
     _one_candidate(monkeypatch, cand, trial, lambda problem, q, *a, **k: fits[id(q)])
     starts = []
 
-    def short(problem, q, fps, nfev):
+    def short(problem, q, given, nfev):  # converged from a fit on a shorter horizon
         starts.append(q)
-        return short_base if q is p else short_cand
+        return fits[id(short_base if q is p else short_cand)]
 
-    monkeypatch.setattr(W, "short_start", short)
+    monkeypatch.setattr(W, "short_converge", short)
     accepted, why, _ = W.search_round(_Timed("time"), None, current, p, [], 0.4, 10, 20)
     assert starts == [p, trial.params]  # the base model's start, then the candidate's
     assert accepted is None and "polished alike" in why and "18.2 %" in why

@@ -344,3 +344,21 @@ def test_settle_takes_the_base_fit_from_a_shorter_horizon_when_it_is_cheaper(mon
     assert out.params is stuck
     monkeypatch.setattr(S, "short_start", lambda *a: None)  # no horizon to shorten
     assert S.settle(_Record(truth, np.eye(2)), None, cur, truth, 20, False, "")[0].params is stuck
+
+
+def test_short_converge_refits_over_the_bounds_of_the_short_fit(monkeypatch):
+    """:func:`.settle.short_converge` converges from the short-horizon fit over the
+    parameters taken again at that fit (an anchored bound widens to take in where it went),
+    and is None where there is no horizon to shorten."""
+    truth, moved, short = preset("tuttle-joint3"), preset("tuttle-joint3"), preset("tuttle-joint3")
+    monkeypatch.setattr(S, "model_params", lambda p, scales, given: [id(p)])
+    seen = []
+    monkeypatch.setattr(S, "short_start", lambda problem, q, fps, nfev: (
+        seen.append(("start", q, fps)) or short))
+    monkeypatch.setattr(S, "converge", lambda problem, q, fps, nfev, **k: (
+        seen.append(("converge", q, fps)) or FitResult(q, {}, {"mean": 0.1}, 0, 0.001)))
+    out = S.short_converge(_Record(truth, np.eye(2)), moved, truth, 20)
+    assert out.params is short
+    assert seen == [("start", moved, [id(moved)]), ("converge", short, [id(short)])]
+    monkeypatch.setattr(S, "short_start", lambda *a: None)
+    assert S.short_converge(_Record(truth, np.eye(2)), moved, truth, 20) is None

@@ -16,7 +16,7 @@ from .paths import reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, rank_candidates
 from .registry import model_params
-from .settle import converge, short_start
+from .settle import converge, short_converge
 
 THRESHOLD = 0.4
 """Least relative cost reduction (40 %) for an effect to be added."""
@@ -170,12 +170,12 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
             # about to pass: the effect must beat the base model's best fit, not one stopped
             # in a local minimum its extra parameters lead out of; converged from a fit on
             # a shorter horizon too (once)
-            alt = _short_fit(problem, current.params, params, nfev_polish)
+            alt = short_converge(problem, current.params, params, nfev_polish)
             strong = alt is not None and alt.cost < ctrl.cost
             ctrl = alt if strong else ctrl
             rel_ctrl = _cut(ctrl, polished.cost)
         if strong and rel_ctrl < threshold:  # the candidate from the same start (fitted alike)
-            alt = _short_fit(problem, polished.params, params, nfev_polish)
+            alt = short_converge(problem, polished.params, params, nfev_polish)
             polished = alt if alt is not None and alt.cost < polished.cost else polished
             rel_ctrl = _cut(ctrl, polished.cost)
         if ctrl.cost < current.cost and rel_ctrl < threshold:
@@ -213,16 +213,6 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
     if accepted is None:
         return None, "nothing (more) worth adding: " + "; ".join(reasons), candidates
     return accepted, "", candidates
-
-
-def _short_fit(problem: Problem, p: JointParams, params: JointParams,
-               nfev: int) -> FitResult | None:
-    """``p`` converged on the record's horizon from a fit on a shorter one first
-    (:func:`.settle.short_start`; None where the comparison has no horizon to shorten)."""
-    start = short_start(problem, p, model_params(p, problem.scales, params), nfev)
-    if start is None:
-        return None
-    return converge(problem, start, model_params(start, problem.scales, params), nfev)
 
 
 def escalate(problem: Problem, vprob: Problem | None, current: FitResult, given: JointParams,

@@ -110,6 +110,18 @@ def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int) -> Join
         return converge(problem, p, fps, nfev).params
 
 
+
+def short_converge(problem, p: JointParams, given: JointParams, nfev: int) -> FitResult | None:
+    """``p`` refitted until it converges on the record's horizon from :func:`short_start`
+    first, each fit over the parameters and bounds of the model it starts from
+    (:func:`.registry.model_params`: an anchored bound widens to take in where the short fit
+    went). None where :func:`short_start` is None. The strong control an effect must beat
+    (:func:`.search.search_round`) and the settled base model (:func:`settle`)."""
+    start = short_start(problem, p, model_params(p, problem.scales, given), nfev)
+    if start is None:
+        return None
+    return converge(problem, start, model_params(start, problem.scales, given), nfev)
+
 def _shortens(q) -> bool:
     """Whether the comparison ``q`` runs on a horizon longer than :data:`SHORT_HORIZON`
     (the time channels of a :class:`.problem.Problem`, not the inverse comparison)."""
@@ -167,10 +179,9 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
     """
     fps = model_params(current.params, problem.scales, given)
     refit = converge(problem, current.params, fps, nfev)
-    short = short_start(problem, current.params, fps, nfev)
-    if short is not None:  # a base fit stuck in a local minimum would read as a residual
-        alt = converge(problem, short, fps, nfev)
-        refit = alt if alt.cost < refit.cost else refit
+    alt = short_converge(problem, current.params, given, nfev)
+    if alt is not None and alt.cost < refit.cost:  # a base fit stuck in a local minimum
+        refit = alt  # would read as a residual
     if refit.cost < current.cost:
         if auto and not problem.inverse and choose is not None:
             choose(problem, vprob, refit.params)
