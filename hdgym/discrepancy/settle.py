@@ -110,7 +110,6 @@ def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int) -> Join
         return converge(problem, p, fps, nfev).params
 
 
-
 def short_converge(problem, p: JointParams, given: JointParams, nfev: int) -> FitResult | None:
     """``p`` refitted until it converges on the record's horizon from :func:`short_start`
     first, each fit over the parameters and bounds of the model it starts from
@@ -121,6 +120,7 @@ def short_converge(problem, p: JointParams, given: JointParams, nfev: int) -> Fi
     if start is None:
         return None
     return converge(problem, start, model_params(start, problem.scales, given), nfev)
+
 
 def _shortens(q) -> bool:
     """Whether the comparison ``q`` runs on a horizon longer than :data:`SHORT_HORIZON`
