@@ -19,7 +19,7 @@ from hdgym.discrepancy.command import diagnose_files
 from hdgym.discrepancy.effect import Scales
 from hdgym.discrepancy.paths import get_value, set_values
 from hdgym.discrepancy.problem import HORIZONS
-from hdgym.discrepancy.registry import REGISTRY, model_params
+from hdgym.discrepancy.registry import REGISTRY, TOLERANCE, model_params
 from hdgym.discrepancy.residuals import lowpass, nmse, order_spectrum
 from hdgym.discrepancy.workflow import diagnose
 from hdgym.effects import EFFECTS
@@ -71,6 +71,11 @@ def test_virtual_paths_round_trip():
         get_value(p, "friction.nowhere")
 
 
+def _param(fps, path):
+    """The fit parameter at ``path`` among ``fps``."""
+    return next(fp for fp in fps if fp.path == path)
+
+
 def test_model_params_follow_effects_and_record_kind():
     p = cases.case_joint()
     free = {fp.path for fp in model_params(p, SCALES)}
@@ -83,8 +88,9 @@ def test_a_given_models_effects_are_refined_where_the_record_reaches_too_little_
     """A record too lightly loaded to name load-dependent friction still moves with the
     tooth friction a given model has: the base fit refines it, as it does a segmented
     spring below half the peak torque. An effect untestable for want of a kind of motion
-    (a locked output, no reversal or standstill) stays as given, as does one given as zero;
-    an effect a search adds must be testable."""
+    (a locked output, no reversal or standstill) is refined late within the tolerance of
+    its given values only; one given as zero stays as given; an effect a search adds must
+    be testable."""
     from hdgym.params import preset
 
     p = preset("hduc20")
@@ -99,7 +105,11 @@ def test_a_given_models_effects_are_refined_where_the_record_reaches_too_little_
     assert spring <= {fp.path for fp in model_params(p, s, p)}
     locked = dataclasses.replace(s, locked=True)
     assert not load.too_small(locked)
-    assert "friction.tooth_mu" not in {fp.path for fp in model_params(p, locked, p)}
+    banded = _param(model_params(p, locked, p), "friction.tooth_mu")
+    mu = p.friction.tooth_mu
+    assert banded.late and banded.lower == pytest.approx((1 - TOLERANCE) * mu)
+    assert banded.upper == pytest.approx((1 + TOLERANCE) * mu)
+    assert _param(model_params(p, s, p), "friction.tooth_mu").upper > 1.5 * mu  # too small
     one_way = dataclasses.replace(s, reversals=0)  # no reversal, no standstill
     assert not REGISTRY["stiction"].testable(one_way)
     assert not REGISTRY["stiction"].too_small(one_way)
@@ -492,12 +502,16 @@ def test_a_run_up_from_rest_shows_a_band_of_speeds():
     fast = Problem(Simulator(small).run("step:3.24", 2.0, seed=1), small).scales
     assert BAND_TIME <= fast.band_time < 0.1 and fast.speed_spread < BAND_SPREAD
     assert REGISTRY["viscous_friction"].why_not(fast) is None
-    # a base model that has viscous friction keeps its given coefficient on a run-up (it
-    # trades against inertia and Coulomb friction there) and refits it on spread speeds
+    # a base model that has viscous friction refines its given coefficient on a run-up
+    # only within its tolerance (it trades against inertia and Coulomb friction there) and
+    # refits it on spread speeds
     viscous = "friction.input.viscous"
-    assert viscous not in {fp.path for fp in model_params(truth, s, truth)}
+    b = truth.friction.input.viscous
+    run_up = _param(model_params(truth, s, truth), viscous)
+    assert run_up.late and run_up.upper == pytest.approx((1 + TOLERANCE) * b)
     spread = dataclasses.replace(s, speed_spread=2 * BAND_SPREAD)
-    assert viscous in {fp.path for fp in model_params(truth, spread, truth)}
+    free = _param(model_params(truth, spread, truth), viscous)
+    assert not free.late and free.upper > 1.5 * b
 
 
 def test_kinematic_error_shows_on_a_part_turn_crossed_back_and_forth():
@@ -516,18 +530,24 @@ def test_kinematic_error_shows_on_a_part_turn_crossed_back_and_forth():
     assert "two WG revolutions" in ke.why_not(dataclasses.replace(sine, wg_turns=0.025))
     # the friction ripple still needs whole turns (its lines flip with the direction)
     assert "two WG revolutions" in REGISTRY["position_dependent_friction"].why_not(sine)
-    # a base model's lines are kept there (they would absorb other effects), an added
-    # kinematic error is fitted
-    with_ke = ke.switch_on(cases.case_joint(), SCALES)
+    # a base model's lines are refined there only within their tolerance, late (freed,
+    # they would absorb other effects); an added kinematic error is fitted
+    with_ke = set_values(ke.switch_on(cases.case_joint(), SCALES),
+                         {"kinematic_error.harmonics[0].sin": 3e-5,
+                          "kinematic_error.harmonics[0].cos": 4e-5})
     plain = cases.case_joint()
 
-    def ke_paths(p, anchor, s):
-        return [fp.path for fp in model_params(p, s, anchor)
-                if fp.path.startswith("kinematic_error.")]
+    def ke_fps(p, anchor, s):
+        return [fp for fp in model_params(p, s, anchor) if fp.path.startswith("kinematic_error.")]
 
-    assert ke_paths(with_ke, with_ke, sine) == []
-    assert ke_paths(with_ke, plain, sine) != []
-    assert ke_paths(with_ke, with_ke, dataclasses.replace(sine, wg_turns=3.0)) != []
+    part = ke_fps(with_ke, with_ke, sine)
+    assert part and all(fp.late for fp in part)
+    line = _param(part, "kinematic_error.harmonics[0].sin")  # a tenth of the line's 5e-5
+    assert (line.lower, line.upper) == pytest.approx((2.5e-5, 3.5e-5))
+    added = ke_fps(with_ke, plain, sine)
+    assert added and not any(fp.late for fp in added)
+    whole = ke_fps(with_ke, with_ke, dataclasses.replace(sine, wg_turns=3.0))
+    assert whole and not any(fp.late for fp in whole)
 
 
 def test_three_outcomes_and_the_next_experiment():
