@@ -159,9 +159,10 @@ SPEED_SPREAD = Condition(
 """Where a base model's own viscous friction is refitted (:attr:`Effect.refit`): a run-up
 alone (:data:`SPEED_BAND`) shows that friction grows with speed, so the effect can be
 tried and added, but its time constant J/b and top speed (tau - F_c)/b leave inertia,
-viscous and Coulomb friction to trade against each other. Refitting a given viscous
-coefficient there also cost the bench's 60 s tuttle-joint3 step record 23 % more
-simulations (5,081 -> 6,272)."""
+viscous and Coulomb friction to trade against each other, so a given viscous coefficient
+is refined there only late, within :data:`.registry.TOLERANCE` of its value (refitted
+freely, it also cost the bench's 60 s tuttle-joint3 step record 23 % more simulations,
+5,081 -> 6,272)."""
 SPEED_BAND = Condition(
     f"a band of speeds (90th over 10th percentile of the moving speed >= {BAND_SPREAD:g}, or "
     f"{BAND_TIME:g} s or more of motion below 1/{BAND_SPREAD:g} of the 90th percentile: a "
@@ -204,10 +205,11 @@ class Effect:
         protocol: the identification protocol (``hdgym experiment NAME``) whose record
             reveals it: the next experiment when this record cannot.
         refit: further conditions under which the parameters of this effect, when the
-            given base model already has it, are refitted (otherwise they keep their given
-            values): where the record shows the effect but cannot tell its parameters from
-            those of other effects, it may be added (an addition must pass the checks of
-            :func:`.workflow.diagnose`) but a base model's values are not moved.
+            given base model already has it, are refitted (otherwise they are refined late
+            within :data:`.registry.TOLERANCE` of their given values only): where the
+            record shows the effect but cannot tell its parameters from those of other
+            effects, it may be added (an addition must pass the checks of
+            :func:`.workflow.diagnose`) but a base model's values move little.
         compare: the comparisons that reveal it: ``"time"`` (the channels sample by
             sample) and, for the spring's effects, ``"spring"`` (on a locked output, the
             residuals averaged over bins of the measured torque and its direction: the

@@ -172,7 +172,8 @@ GEAR_EFFECTS: tuple[Effect, ...] = (
            "kinematic error: output lags/leads motor/ratio periodically in the WG angle",
            _ke_params, _ke_on, _ke_neutral, seen=(FREE, SIMULATED, TE, MOVING, TURNS_OR_REVISITS),
            # over a part turn its lines alias into each other and into any smooth function
-           # of the angle (in a back-and-forth motion, of time): a given model's are kept
+           # of the angle (in a back-and-forth motion, of time): a given model's are refined
+           # only within their tolerance (registry.TOLERANCE)
            refit=(TURNS,),
            channels="transmission_error against the WG angle", protocol="slow_constant_speed",
            compare=("time", "lines")),
