@@ -384,8 +384,8 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         {**spring_stuck, **({} if steps else partial_evidence(seen + candidates))}, alone)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
-    # the whole record, compared once for both fits (its noise estimate alone costs 1.5 s
-    # on a 60 s record)
+    # the whole record, compared once for both fits (building the comparison, its noise
+    # estimate included, costs about 1.5 s on a 60 s record)
     whole = None if full is None else problem.like(full, params)
     return Diagnosis(
         source=record.source, mode=problem.mode, channels=problem.names,
