@@ -47,6 +47,11 @@ SETTLE_TOL = 0.02
 convergence tolerance, not tuned on a case)."""
 SETTLE_ROUNDS = 4
 """Most refit rounds :func:`converge` runs (the cost of a diagnosis that adds nothing)."""
+START_ROUNDS = 2
+"""Refit rounds of the shorter-horizon start of :func:`converge_named` (one over the model's
+own parameters, one with the :attr:`.effect.FitParam.late` ones): a start, not the final
+fit, and the cheapest start is converged further. Its last two rounds cost the bench's 60 s
+record (tuttle-joint3 / kinematic_error / step:0.30) 8 of 65 s and lowered nothing there."""
 
 
 def converge(problem, p: JointParams, fps: list[FitParam], nfev: int,
@@ -93,7 +98,8 @@ def _horizon(problem, h: float):
             q.segment = b
 
 
-def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int) -> JointParams | None:
+def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int,
+                rounds: int = SETTLE_ROUNDS) -> JointParams | None:
     """``p`` refitted until it converges on :data:`SHORT_HORIZON` first: a start for the fit
     on the record's own horizon (multiple shooting's continuation: the shorter the segments,
     the less a parameter error builds up within one and the wider the valley around the
@@ -107,7 +113,7 @@ def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int) -> Join
     if not all(_shortens(q) for q in parts):
         return None
     with _horizon(problem, SHORT_HORIZON):
-        return converge(problem, p, fps, nfev).params
+        return converge(problem, p, fps, nfev, rounds=rounds).params
 
 
 def short_converge(problem, p: JointParams, given: JointParams, nfev: int) -> FitResult | None:
@@ -251,7 +257,7 @@ def converge_named(problem: Problem, vprob: Problem | None, current: FitResult,
     starts = [current.params, set_values(current.params, core)]
     if base is not current.params:  # (a given base that does not validate: no third start)
         starts.append(base)
-    short = short_start(problem, current.params, fps, nfev)
+    short = short_start(problem, current.params, fps, nfev, rounds=START_ROUNDS)
     if short is not None:
         starts.append(short)
     firsts = sorted((fit(problem, q, fps, max_nfev=nfev, central=True) for q in starts),
