@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -873,6 +874,30 @@ def test_ordered_map_keeps_the_order_in_worker_processes():
 
     assert list(ordered_map(abs, [-1, 2, -3], jobs=2)) == [1, 2, 3]
     assert list(ordered_map(abs, [-4], jobs=2)) == [4]
+
+
+def test_call_all_runs_different_functions_on_one_pool_in_order():
+    from functools import partial
+
+    from hdgym.discrepancy.pool import call_all
+
+    calls = [partial(time.sleep, 0.2), partial(abs, -2), partial(divmod, 7, 3), partial(abs, 5)]
+    assert list(call_all(calls, jobs=2)) == [None, 2, (2, 1), 5]
+    assert list(call_all(calls[1:], jobs=1)) == [2, (2, 1), 5]
+    runs = call_all([partial(abs, -1), partial(math.sqrt, -1.0)], jobs=2)
+    assert next(runs) == 1
+    with pytest.raises(ValueError):  # a failing case fails the page, not silently skipped
+        next(runs)
+
+
+def test_the_page_runs_the_blind_set_only_in_quick_mode():
+    from hdgym.discrepancy.holdout import BLIND, FRESH_SEED, PAGE_DEVELOPMENT_SEEDS
+    from hdgym.discrepancy.holdout_page import page_sets
+
+    assert page_sets(quick=True) == [("Blind (issue 14)", list(BLIND))]
+    titles = [t for t, _ in page_sets()]
+    assert titles[0] == "Blind (issue 14)" and titles[-1] == f"Fresh hold-out (seed {FRESH_SEED})"
+    assert len(titles) == 2 + len(PAGE_DEVELOPMENT_SEEDS)
 
 
 def test_setter_builds_each_joint_from_a_fresh_copy():

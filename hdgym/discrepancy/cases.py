@@ -49,8 +49,10 @@ from .cases_notes import HOW_TO_READ
 from .diagnosis import HIT_CUT, Diagnosis
 from .effect import Scales
 from .experiments import PROTOCOLS, command
+from .holdout import run as run_holdout
+from .holdout_page import page_section, page_sets
 from .paths import get_value, set_values
-from .pool import ordered_map
+from .pool import call_all
 from .registry import REGISTRY, core_params
 from .search import MIN_GAIN, THRESHOLD, VALIDATION_GAIN
 from .workflow import diagnose
@@ -266,9 +268,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     check_out(args.out, args.quick)
     cases = [c for c in all_cases() if not args.only or c.name in args.only]
+    sets = [] if args.tuned_only else page_sets(args.quick)
+    # one pool for the tuned cases and every hold-out set: no core waits for a set's last case
+    calls = [partial(run_case, c, quick=args.quick) for c in cases] + [
+        partial(run_holdout, c, quick=args.quick) for _, set_cases in sets for c in set_cases]
+    runs = call_all(calls, args.jobs)
     results = []
-    for c, r in zip(cases, ordered_map(partial(run_case, quick=args.quick), cases, args.jobs),
-                    strict=True):
+    for c in cases:
+        r = next(runs)
         print(f"{c.name}: found {r.found or 'none'}, NMSE {r.diagnosis.nmse_before:.3g} -> "
               f"{r.diagnosis.nmse_after:.3g} %, pass {r.passed} ({r.seconds:.1f} s)", flush=True)
         results.append(r)
@@ -319,10 +326,8 @@ def main(argv: list[str] | None = None) -> int:
         "",
     ])
     text += HOW_TO_READ
-    if not args.tuned_only:
-        from .holdout_page import page_section
-
-        text += page_section(quick=args.quick, jobs=args.jobs)
+    if sets:
+        text += page_section(sets, runs, quick=args.quick)
     failed = [r for r in results if not r.passed]
     if failed:
         text += "\nCases that fail (stated, not hidden):\n\n" + "\n".join(

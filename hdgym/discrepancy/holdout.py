@@ -49,7 +49,7 @@ from . import truth as T
 from .diagnosis import HIT_CUT, Diagnosis
 from .effect import Scales
 from .paths import get_value, set_values
-from .pool import ordered_map
+from .pool import call_all
 from .registry import REGISTRY, core_params
 
 DURATION = 6.0
@@ -469,12 +469,15 @@ def main(argv: list[str] | None = None) -> int:
         check_out(args.out, args.quick)
     sets = {"blind": list(BLIND), "holdout": holdout_cases(args.seed)}
     chosen = ["blind", "holdout"] if args.set == "both" else [args.set]
+    chosen_cases = {w: [c for c in sets[w] if not args.only or c.name in args.only]
+                    for w in chosen}
+    runs = call_all([partial(run, c, quick=args.quick) for w in chosen
+                     for c in chosen_cases[w]], args.jobs)
     text = []
     for which in chosen:
         results = []
-        chosen_cases = [c for c in sets[which] if not args.only or c.name in args.only]
-        for c, r in zip(chosen_cases, ordered_map(partial(run, quick=args.quick), chosen_cases,
-                                                  args.jobs), strict=True):
+        for c in chosen_cases[which]:
+            r = next(runs)
             print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
                   f", NMSE {r.diagnosis.nmse_before:.3g} -> {r.diagnosis.nmse_after:.3g} % "
                   f"(truth {r.truth:.3g} %, floor estimate {r.floor:.3g} %, gap cut "

@@ -3,28 +3,42 @@ cases are made and judged, and their tables (:mod:`.holdout` makes and runs the 
 
 from __future__ import annotations
 
-from functools import partial
+from collections.abc import Iterator
 
 from .holdout import (
     BLIND,
     DEVELOPMENT_SEEDS,
     FRESH_SEED,
     PAGE_DEVELOPMENT_SEEDS,
+    Blind,
+    Result,
     holdout_cases,
-    run,
     summary,
     table,
 )
-from .pool import ordered_map
 
 
-def page_section(quick: bool = False, jobs: int = 1) -> str:
-    """The blind and hold-out sections of results/discrepancy.md (runs every case).
+def page_sets(quick: bool = False) -> list[tuple[str, list[Blind]]]:
+    """The page's blind and hold-out sets, ``(title, cases)``: the blind cases, and unless
+    ``quick`` the development and fresh hold-out sets (:data:`.holdout.PAGE_DEVELOPMENT_SEEDS`,
+    :data:`.holdout.FRESH_SEED`)."""
+    sets = [("Blind (issue 14)", list(BLIND))]
+    if not quick:
+        sets += [(f"Development hold-out (seed {s})", holdout_cases(s))
+                 for s in PAGE_DEVELOPMENT_SEEDS]
+        sets.append((f"Fresh hold-out (seed {FRESH_SEED})", holdout_cases(FRESH_SEED)))
+    return sets
+
+
+def page_section(sets: list[tuple[str, list[Blind]]], results: Iterator[Result],
+                 quick: bool = False) -> str:
+    """The blind and hold-out sections of results/discrepancy.md for :func:`page_sets`
+    ``sets``, whose cases' results ``results`` yields in order (:func:`.holdout.run` of each,
+    :func:`.pool.call_all`; printed as they come).
 
     Every case runs the workflow's full fit settings, what ``hdgym diagnose`` runs (a
     case's verdict can depend on the fit's budget, so the page judges the settings users
-    get); ``quick`` runs the blind cases only, with the quick fit settings; ``jobs`` worker
-    processes (:func:`.pool.ordered_map`).
+    get); ``quick`` (the blind cases only, with the quick fit settings) says so on the page.
     """
     from .floor import CURVE_SHARE
     from .outcome import CARRY_FACTOR, FLOOR_FACTOR, NOISE_FACTOR, RESOLVED
@@ -113,18 +127,14 @@ def page_section(quick: bool = False, jobs: int = 1) -> str:
              "run with `python -m hdgym.discrepancy.holdout --seed S`), and seed "
              f"{FRESH_SEED}, drawn the same way after those changes and never run before this "
              "page: the set to judge by.", ""]
-    sets = [("Blind (issue 14)", list(BLIND))]
     if quick:
         parts += ["(A --quick run: the hold-out cases are skipped.)", ""]
-    else:
-        sets += [(f"Development hold-out (seed {s})", holdout_cases(s))
-                 for s in PAGE_DEVELOPMENT_SEEDS]
-        sets.append((f"Fresh hold-out (seed {FRESH_SEED})", holdout_cases(FRESH_SEED)))
     for title, cases in sets:
-        results = []
-        for c, r in zip(cases, ordered_map(partial(run, quick=quick), cases, jobs), strict=True):
+        done = []
+        for c in cases:
+            r = next(results)
             print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
                   f", hit {r.hit} ({r.seconds:.1f} s)", flush=True)
-            results.append(r)
-        parts += [f"### {title}", "", table(results), "", summary(results), ""]
+            done.append(r)
+        parts += [f"### {title}", "", table(done), "", summary(done), ""]
     return "\n".join(parts) + "\n"
