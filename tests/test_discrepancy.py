@@ -869,11 +869,13 @@ def test_holdout_scoring_counts_honest_misses():
     assert not res("stiction", "named", ["viscous_friction"], size=0.0).honest
 
 
-def test_ordered_map_keeps_the_order_in_worker_processes():
-    from hdgym.discrepancy.pool import ordered_map
+def test_call_all_keeps_the_order_in_worker_processes():
+    from functools import partial
 
-    assert list(ordered_map(abs, [-1, 2, -3], jobs=2)) == [1, 2, 3]
-    assert list(ordered_map(abs, [-4], jobs=2)) == [4]
+    from hdgym.discrepancy.pool import call_all
+
+    assert list(call_all([partial(abs, x) for x in (-1, 2, -3)], jobs=2)) == [1, 2, 3]
+    assert list(call_all([partial(abs, -4)], jobs=2)) == [4]
 
 
 def test_call_all_runs_different_functions_on_one_pool_in_order():

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from functools import partial
 from typing import Any
 
 from hdgym.progress import bar
@@ -35,8 +34,3 @@ def call_all(calls: Sequence[Callable[[], Any]], jobs: int = 1,
                 yield f.result()
                 done.update(1)
 
-
-def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], jobs: int = 1,
-                desc: str = "cases") -> Iterator[Any]:
-    """``fn(item)`` for each item, in the items' order (:func:`call_all`)."""
-    return call_all([partial(fn, it) for it in items], jobs, desc)
