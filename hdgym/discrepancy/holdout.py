@@ -11,8 +11,9 @@ here are only ever evaluated:
   ones that can show it (validated on the same kind drawn again), and the base model's
   fitted parameters off nominal by 2-5 %, as a real drive would be.
 
-Each case also measures how much the hidden effect changes its record (:func:`effect_size`);
-an effect that changes it by less than :data:`PRESENT` x the measurement noise is not
+Each case also measures how much the hidden effect changes its record (:func:`effect_size`,
+on the time channels or the effect's own view, the spring curve or the line channels); an
+effect that changes it by less than :data:`PRESENT` x that view's measurement noise is not
 present in that record (a preset may give it no size at all), and then nothing may be named.
 
 A case *hits* when the hidden effect is named first and cuts at least 80 % of the closable
@@ -135,13 +136,12 @@ DEVELOPMENT_SEEDS = (14, 26, 38, 50, 62, 74, 86, 98, 110, 122, 134, 146, 158, 17
                      206, 218, 230, 242, 254, 266, 278, 290, 302, 314, 326, 338, 350, 362)
 """Hold-out sets whose failing cases were run one by one while the workflow was changed
 (14-110 by 12, each after its first page, on 2026-11-26; 122-206 on 2026-11-27; 230-302 on
-2026-11-28; 314 on 2026-12-01; 326, 338, 350 and 362 on 2026-12-02), or that judged two pages and
-then saw the case construction change (158: the effect size measured against what the base
-model lacks, :func:`hidden_off`, which relabels its stiction cases): no longer untouched. (The
-stiction cases of 98-194 were run again when :func:`case_truth` took Stribeck friction out
-of their truth.) Seed 218 judged one page and none of its cases was run after it; it moved
-here because that page listed its misses and the fits changed after it
-(:func:`.fitting.fit`'s pass on the mean reading)."""
+2026-11-28; 314 on 2026-12-01; 326-362 on 2026-12-02), or that judged two pages and then saw
+the case construction change (158: the effect size measured against what the base model
+lacks, :func:`hidden_off`, relabelling its stiction cases): no longer untouched. (98-194's
+stiction cases ran again when :func:`case_truth` took Stribeck friction out of their truth.)
+Seed 218 judged one page, none of its cases run after it; it moved here because that page
+listed its misses and the fits changed after it (:func:`.fitting.fit`'s mean-reading pass)."""
 PAGE_DEVELOPMENT_SEEDS = (362,)
 """Development sets the page reports (the latest; the others: ``--seed``)."""
 FRESH_SEED = 374
@@ -297,7 +297,8 @@ def effect_size(case: Blind, truth: JointParams, train: Record, command: str | N
     stiction / sine:0.411:0.5, where naming stiction cut the NMSE by 70 %); the change of
     the comparison channels is an NMSE, percent, mean over channels, against the measured
     record's variance, beside the record's measurement-noise NMSE
-    (:func:`.noise.noise_nmse`).
+    (:func:`.noise.noise_nmse`); or those of the effect's own view where it stands higher
+    above that view's noise (:func:`.truth.view_size`: the spring curve, the line channels).
     """
     from . import residuals as R
     from .problem import Problem
@@ -314,6 +315,10 @@ def effect_size(case: Blind, truth: JointParams, train: Record, command: str | N
         runs.append(R.channels(raw, prob.names, prob.ratio, prob.dt, prob.cutoff))
     size = float(np.mean([100 * np.mean((runs[0][k] - runs[1][k]) ** 2) / prob.sigma2[k]
                           for k in prob.names]))
+    views = tuple(v for v in REGISTRY[case.hidden].compare if v != "time")
+    seen = T.view_size(train, truth, unperturbed_base(case, truth), views)
+    if seen is not None and seen[0] * prob.noise["mean"] > size * seen[1]:
+        return seen
     return size, prob.noise["mean"]
 
 
@@ -420,39 +425,6 @@ def run(case: Blind, quick: bool = False) -> Result:
                   noise_est=dict(vt.noise), val_size=val_size, val_noise=val_noise)
 
 
-def table(results: list[Result]) -> str:
-    lines = ["| case | effect NMSE % (noise %), training / validation | outcome | "
-             "found (in order) | NMSE before % | NMSE after % | truth % | cut | gap cut | hit | "
-             "honest | next experiment | s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in results:
-        d = r.diagnosis
-        nxt = ", ".join(f"`{x}`" for x in d.next_experiments) or "-"
-        size = (f"{r.size:.2g} ({r.noise:.2g}) / {r.val_size:.2g} ({r.val_noise:.2g})"
-                + ("" if r.present or r.case.hidden is None else ": not present"))
-        found = ", ".join(d.missing_effects) or "none"
-        if d.compare in ("spring", "lines"):  # before and after are NMSE of that view
-            found += " (spring curve)" if d.compare == "spring" else " (line channels)"
-        gap = "-" if math.isnan(r.gap_cut) else f"{100 * r.gap_cut:.0f} %"
-        lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
-                     f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {r.truth:.3g} "
-                     f"| {100 * d.nmse_cut:.0f} % | {gap} | "
-                     f"{'yes' if r.hit else '**no**'} | {'yes' if r.honest else '**no**'} | "
-                     f"{nxt} | {r.seconds:.1f} |")
-    return "\n".join(lines)
-
-
-def summary(results: list[Result]) -> str:
-    n = len(results)
-    hits = sum(r.hit for r in results)
-    raw = sum(r.raw_hit for r in results)
-    honest = sum(r.honest for r in results)
-    return (f"{hits} of {n} hit ({100 * hits / max(n, 1):.0f} %; judged by the raw cut: {raw} "
-            f"of {n}); {honest} of {n} hit or say "
-            f"unexplained/untestable instead of \"nothing missing\" "
-            f"({100 * honest / max(n, 1):.0f} %).")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hdgym.discrepancy.holdout",
                                  description=__doc__.splitlines()[0])
@@ -465,6 +437,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="draw the hold-out cases with this seed (default %(default)s, a "
                     f"development set; {FRESH_SEED}: the fresh set that judges, never tune on it)")
     args = ap.parse_args(argv)
+    from .holdout_page import summary, table
+
     if args.out:
         check_out(args.out, args.quick)
     sets = {"blind": list(BLIND), "holdout": holdout_cases(args.seed)}
