@@ -834,7 +834,7 @@ def test_holdout_cases_cover_every_effect_on_two_presets():
 def test_holdout_scoring_counts_honest_misses():
     from types import SimpleNamespace
 
-    from hdgym.discrepancy import holdout, holdout_page
+    from hdgym.discrepancy import holdout
     from hdgym.discrepancy.diagnosis import Diagnosis
 
     class Stand(SimpleNamespace):  # a diagnosis's fields, with its own cut
@@ -857,8 +857,8 @@ def test_holdout_scoring_counts_honest_misses():
     # a truth not below the NMSE before leaves no gap: the raw cut decides
     no_gap = res("stiction", "named", ["stiction"], after=5.0, truth=12.0)
     assert math.isnan(no_gap.gap_cut) and not no_gap.hit
-    assert "judged by the raw cut: 0 of 2" in holdout_page.summary([floor, no_gap])
-    assert holdout_page.summary([floor, no_gap]).startswith("1 of 2 hit")
+    assert "judged by the raw cut: 0 of 2" in holdout.summary([floor, no_gap])
+    assert holdout.summary([floor, no_gap]).startswith("1 of 2 hit")
     miss = res("stiction", "nothing missing", [])
     assert not miss.hit and not miss.honest
     assert res("stiction", "nothing missing", [], untestable=["stiction"]).honest

@@ -146,8 +146,7 @@ PAGE_DEVELOPMENT_SEEDS = (362,)
 """Development sets the page reports (the latest; the others: ``--seed``)."""
 FRESH_SEED = 374
 """Seed of the hold-out set that judges the workflow: drawn on 2026-12-02 after seed 362's
-page, whose misses were then run one by one as development cases; never run before its
-first page."""
+page, whose misses were then run one by one as development cases; unseen before its page."""
 
 
 def validation_command(kind: str, imax: float, seed: int, training: str) -> str:
@@ -315,8 +314,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record, command: str | N
         runs.append(R.channels(raw, prob.names, prob.ratio, prob.dt, prob.cutoff))
     size = float(np.mean([100 * np.mean((runs[0][k] - runs[1][k]) ** 2) / prob.sigma2[k]
                           for k in prob.names]))
-    views = tuple(v for v in REGISTRY[case.hidden].compare if v != "time")
-    seen = T.view_size(train, truth, unperturbed_base(case, truth), views)
+    seen = T.view_size(train, truth, unperturbed_base(case, truth), REGISTRY[case.hidden].compare)
     if seen is not None and seen[0] * prob.noise["mean"] > size * seen[1]:
         return seen
     return size, prob.noise["mean"]
@@ -425,6 +423,38 @@ def run(case: Blind, quick: bool = False) -> Result:
                   noise_est=dict(vt.noise), val_size=val_size, val_noise=val_noise)
 
 
+def table(results: list[Result]) -> str:
+    lines = ["| case | effect NMSE % (noise %), training / validation | outcome | "
+             "found (in order) | NMSE before % | NMSE after % | truth % | cut | gap cut | hit | "
+             "honest | next experiment | s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        d = r.diagnosis
+        nxt = ", ".join(f"`{x}`" for x in d.next_experiments) or "-"
+        size = (f"{r.size:.2g} ({r.noise:.2g}) / {r.val_size:.2g} ({r.val_noise:.2g})"
+                + ("" if r.present or r.case.hidden is None else ": not present"))
+        found = ", ".join(d.missing_effects) or "none"
+        if d.compare in ("spring", "lines"):  # before and after are NMSE of that view
+            found += " (spring curve)" if d.compare == "spring" else " (line channels)"
+        gap = "-" if math.isnan(r.gap_cut) else f"{100 * r.gap_cut:.0f} %"
+        lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
+                     f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {r.truth:.3g} "
+                     f"| {100 * d.nmse_cut:.0f} % | {gap} | "
+                     f"{'yes' if r.hit else '**no**'} | {'yes' if r.honest else '**no**'} | "
+                     f"{nxt} | {r.seconds:.1f} |")
+    return "\n".join(lines)
+
+
+def summary(results: list[Result]) -> str:
+    n = len(results)
+    hits = sum(r.hit for r in results)
+    raw = sum(r.raw_hit for r in results)
+    honest = sum(r.honest for r in results)
+    return (f"{hits} of {n} hit ({100 * hits / max(n, 1):.0f} %; judged by the raw cut: {raw} "
+            f"of {n}); {honest} of {n} hit or say unexplained/untestable instead of \"nothing "
+            f"missing\" ({100 * honest / max(n, 1):.0f} %).")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hdgym.discrepancy.holdout",
                                  description=__doc__.splitlines()[0])
@@ -437,8 +467,6 @@ def main(argv: list[str] | None = None) -> int:
                     help="draw the hold-out cases with this seed (default %(default)s, a "
                     f"development set; {FRESH_SEED}: the fresh set that judges, never tune on it)")
     args = ap.parse_args(argv)
-    from .holdout_page import summary, table
-
     if args.out:
         check_out(args.out, args.quick)
     sets = {"blind": list(BLIND), "holdout": holdout_cases(args.seed)}

@@ -3,7 +3,6 @@ cases are made and judged, and their tables (:mod:`.holdout` makes and runs the 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 from .holdout import (
@@ -14,40 +13,9 @@ from .holdout import (
     Blind,
     Result,
     holdout_cases,
+    summary,
+    table,
 )
-
-
-def table(results: list[Result]) -> str:
-    lines = ["| case | effect NMSE % (noise %), training / validation | outcome | "
-             "found (in order) | NMSE before % | NMSE after % | truth % | cut | gap cut | hit | "
-             "honest | next experiment | s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in results:
-        d = r.diagnosis
-        nxt = ", ".join(f"`{x}`" for x in d.next_experiments) or "-"
-        size = (f"{r.size:.2g} ({r.noise:.2g}) / {r.val_size:.2g} ({r.val_noise:.2g})"
-                + ("" if r.present or r.case.hidden is None else ": not present"))
-        found = ", ".join(d.missing_effects) or "none"
-        if d.compare in ("spring", "lines"):  # before and after are NMSE of that view
-            found += " (spring curve)" if d.compare == "spring" else " (line channels)"
-        gap = "-" if math.isnan(r.gap_cut) else f"{100 * r.gap_cut:.0f} %"
-        lines.append(f"| {r.case.name} | {size} | {d.outcome} | {found} "
-                     f"| {d.nmse_before:.3g} | {d.nmse_after:.3g} | {r.truth:.3g} "
-                     f"| {100 * d.nmse_cut:.0f} % | {gap} | "
-                     f"{'yes' if r.hit else '**no**'} | {'yes' if r.honest else '**no**'} | "
-                     f"{nxt} | {r.seconds:.1f} |")
-    return "\n".join(lines)
-
-
-def summary(results: list[Result]) -> str:
-    n = len(results)
-    hits = sum(r.hit for r in results)
-    raw = sum(r.raw_hit for r in results)
-    honest = sum(r.honest for r in results)
-    return (f"{hits} of {n} hit ({100 * hits / max(n, 1):.0f} %; judged by the raw cut: {raw} "
-            f"of {n}); {honest} of {n} hit or say "
-            f"unexplained/untestable instead of \"nothing missing\" "
-            f"({100 * honest / max(n, 1):.0f} %).")
 
 
 def page_sets(quick: bool = False) -> list[tuple[str, list[Blind]]]:

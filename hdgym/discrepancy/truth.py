@@ -80,17 +80,18 @@ def view_size(record: Record, truth: JointParams, without: JointParams,
     highest above its noise (None: no view of ``views`` applies to the record).
 
     ``truth``: the joint the record was made with; ``without``: the same joint lacking the
-    effect. ``views``: the effect's declared comparisons (:attr:`.effect.Effect.compare`)
-    other than ``"time"``: ``"spring"`` on a locked output (the binned spring curve, where a
-    hardening spring stands out although a linear stiffness absorbs it on the time
-    channels), ``"lines"`` on a free one (the line channels of the WG angle's orders).
+    effect. ``views``: the effect's declared comparisons (:attr:`.effect.Effect.compare`),
+    of which ``"time"`` is skipped: ``"spring"`` on a locked output (the binned spring
+    curve, where a hardening spring stands out although a linear stiffness absorbs it on
+    the time channels), ``"lines"`` on a free one (the line channels of the WG angle's
+    orders).
     Both joints are compared exactly as the diagnosis compares on that view
     (:meth:`.problem.Problem.residuals`, which subtract the same measurement).
     """
     best = None
     for view in views:
         prob = Problem(record, truth)
-        if view == "spring" and not prob.locked:
+        if view == "time" or view == "spring" and not prob.locked:
             continue
         try:
             prob.set_compare(view)
