@@ -142,8 +142,8 @@ lacks, :func:`hidden_off`, relabelling its stiction cases): no longer untouched.
 stiction cases ran again when :func:`case_truth` took Stribeck friction out of their truth.)
 Seed 218 judged one page, none of its cases run after it; it moved here because that page
 listed its misses and the fits changed after it (:func:`.fitting.fit`'s mean-reading pass)."""
-PAGE_DEVELOPMENT_SEEDS = (362,)
-"""Development sets the page reports (the latest; the others: ``--seed``)."""
+PAGE_DEVELOPMENT_SEEDS: tuple[int, ...] = ()
+"""Development sets the page reports (none: run them with ``--seed``)."""
 FRESH_SEED = 374
 """Seed of the hold-out set that judges the workflow: drawn on 2026-12-02 after seed 362's
 page, whose misses were then run one by one as development cases; unseen before its page."""

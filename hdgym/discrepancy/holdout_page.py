@@ -123,8 +123,9 @@ def page_section(sets: list[tuple[str, list[Blind]]], results: Iterator[Result],
              f"{', '.join(map(str, DEVELOPMENT_SEEDS))} were each the fresh set of an earlier "
              "page and then had their failing cases run one by one to find their causes while "
              "the workflow was changed (so they are no longer untouched: development sets; "
-             f"seed {', '.join(map(str, PAGE_DEVELOPMENT_SEEDS))} is reported here, the others "
-             "run with `python -m hdgym.discrepancy.holdout --seed S`), and seed "
+             + (f"seed {', '.join(map(str, PAGE_DEVELOPMENT_SEEDS))} is reported here, the "
+                "others run" if PAGE_DEVELOPMENT_SEEDS else "they run") +
+             " with `python -m hdgym.discrepancy.holdout --seed S`), and seed "
              f"{FRESH_SEED}, drawn the same way after those changes and never run before this "
              "page: the set to judge by.", ""]
     if quick:

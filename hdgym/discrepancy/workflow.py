@@ -305,7 +305,7 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                 lambda cur, n=n_view: search_round(problem, vprob, cur, params, base_paths,
                                                    threshold, n, nfev_polish, ESCALATED_GAIN,
                                                    True, min_score=min_score),
-                view)
+                view, nfev_base)
             untestable_why = {n: w for n, w in untestable_why.items()  # compared on the curve
                               if not REGISTRY[n].testable(replace(problem.scales,
                                                                   spring=view == "spring"))}
