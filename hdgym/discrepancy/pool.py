@@ -33,4 +33,3 @@ def call_all(calls: Sequence[Callable[[], Any]], jobs: int = 1,
             for f in futures:
                 yield f.result()
                 done.update(1)
-
