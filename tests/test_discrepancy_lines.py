@@ -64,6 +64,28 @@ def test_the_line_channels_are_searched_only_where_a_line_effect_is_missing():
     assert views(prob, both) == ()
 
 
+def test_a_transmission_error_shown_on_its_lines_makes_the_kinematic_error_testable():
+    """The hdf40 drive's output encoder is too coarse for its transmission error to be a
+    time channel, so the kinematic error is untestable there; the TE line channel, averaged
+    over windows, shows it (development seed 374, hdf40 / kinematic_error / step:3.79: the
+    effect changes the line channels by 100 % NMSE, noise 0.4-1.4 %), so the line channels
+    are searched for it and the effect is testable while they are compared, and not after."""
+    from hdgym.discrepancy.registry import REGISTRY
+
+    truth = preset("hdf40")
+    base = truth.without("kinematic_error")
+    prob = Problem(Simulator(truth).run("step:3.8", 2.0, seed=1), base)
+    ke = REGISTRY["kinematic_error"]
+    assert "transmission_error" not in prob.names and not ke.testable(prob.scales)
+    assert "te_lines" in prob.line_channels().names
+    assert ke.testable(prob.view_scales("lines")) and not ke.testable(prob.view_scales("time"))
+    assert views(prob, base) == ("lines",)
+    prob.set_compare("lines")
+    assert ke.testable(prob.scales)
+    prob.set_compare("time")
+    assert not ke.testable(prob.scales) and "motor_speed" in prob.names
+
+
 def test_lines_repeat_from_window_to_window_and_other_content_does_not():
     """A line keeps its coefficients from one window to the next (a split line turns them
     slowly); coefficients that do not repeat are not lines."""

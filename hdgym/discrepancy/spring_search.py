@@ -27,14 +27,17 @@ def views(problem: Problem, p: JointParams) -> tuple[str, ...]:
     """The comparisons :func:`search_view` can search on ``problem``'s record with model
     ``p``: the spring curve on a locked output; the line channels where the record has them
     (:meth:`.problem.Problem.line_channels`) and an effect they reveal is missing from ``p``
-    and testable."""
+    and testable on them (:meth:`.problem.Problem.view_scales`)."""
     if problem.inverse or problem.compare != "time":
         return ()
     if problem.locked:
         return ("spring",)
+    if problem.line_channels() is None:
+        return ()
+    shown = problem.view_scales("lines")  # the lines show a transmission error's own lines
     missing = [n for n, e in REGISTRY.items() if "lines" in e.compare
-               and lacks(p, n, problem.scales) and e.testable(problem.scales)]
-    return ("lines",) if missing and problem.line_channels() is not None else ()
+               and lacks(p, n, problem.scales) and e.testable(shown)]
+    return ("lines",) if missing else ()
 
 
 def search_view(problem: Problem, vprob: Problem | None, current: FitResult,

@@ -306,9 +306,8 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
                                                    threshold, n, nfev_polish, ESCALATED_GAIN,
                                                    True, min_score=min_score),
                 view, nfev_base)
-            untestable_why = {n: w for n, w in untestable_why.items()  # compared on the curve
-                              if not REGISTRY[n].testable(replace(problem.scales,
-                                                                  spring=view == "spring"))}
+            untestable_why = {n: w for n, w in untestable_why.items()  # compared on the view
+                              if not REGISTRY[n].testable(problem.view_scales(view))}
             if found_s is not None:
                 accepted, candidates, current, before = found_s, cands_s, on_curve, on_curve
                 escalated = True
