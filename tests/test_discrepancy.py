@@ -902,6 +902,32 @@ def test_the_page_runs_the_blind_set_only_in_quick_mode():
     assert len(titles) == 2 + len(PAGE_DEVELOPMENT_SEEDS)
 
 
+def test_sections_take_each_sets_results_in_order_and_print_each(monkeypatch, capsys):
+    """The page and the hold-out CLI share :func:`holdout.sections`: one table and summary
+    per set, of that set's results in the order the pool yields them, each printed as it
+    comes."""
+    from types import SimpleNamespace
+
+    from hdgym.discrepancy import holdout
+
+    monkeypatch.setattr(holdout, "table", lambda rs: "|" + ",".join(r.case.name for r in rs))
+    monkeypatch.setattr(holdout, "summary", lambda rs: f"{sum(r.hit for r in rs)} hit")
+
+    def result(name: str, hit: bool):
+        return SimpleNamespace(case=SimpleNamespace(name=name), hit=hit, gap_cut=0.9,
+                               seconds=1.0, diagnosis=SimpleNamespace(outcome="named",
+                                                                      missing_effects=["x"]),
+                               noise_true={"motor_speed": 1e-3}, noise_est={"motor_speed": 2e-3})
+
+    sets = [("A", ["a1", "a2"]), ("B", ["b1"])]
+    results = iter([result("a1", True), result("a2", False), result("b1", True)])
+    assert holdout.sections(sets, results) == ["### A", "", "|a1,a2", "", "1 hit", "",
+                                               "### B", "", "|b1", "", "1 hit", ""]
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in printed] == ["a1", "a2", "b1"]
+    assert "motor_speed 0.001 / 0.002" in printed[0]
+
+
 def test_setter_builds_each_joint_from_a_fresh_copy():
     """A fit builds a joint from one template at every evaluation: a value set in one call
     (nested items and the virtual fields included) must not leak into the next call or

@@ -36,6 +36,7 @@ import argparse
 import math
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import partial
 
@@ -182,10 +183,9 @@ def holdout_cases(seed: int = HOLDOUT_SEED) -> list[Blind]:
             cmd, locked, load = _command(kind, p.amplifier.current_limit, rng)
             t_load = load * p.motor.torque_constant * p.ratio * p.amplifier.current_limit
             s = int(rng.integers(1 << 16))
+            val = validation_command(kind, p.amplifier.current_limit, s, cmd)
             out.append(Blind(str(name), effect, cmd, locked, off=0.05,
-                             load=t_load if load else None, seed=s,
-                             validation=validation_command(kind, p.amplifier.current_limit, s,
-                                                           cmd)))
+                             load=t_load if load else None, seed=s, validation=val))
     for k, name in enumerate(rng.choice(names, size=2, replace=False)):
         p = preset(str(name))
         kind = ("sine", "locked-random")[k]
@@ -455,6 +455,22 @@ def summary(results: list[Result]) -> str:
             f"missing\" ({100 * honest / max(n, 1):.0f} %).")
 
 
+def sections(sets: list[tuple[str, list[Blind]]], results: Iterator[Result]) -> list[str]:
+    """Markdown lines: a :func:`table` and :func:`summary` per ``(title, cases)`` of ``sets``,
+    of the results ``results`` yields in order (each printed as it comes)."""
+    text = []
+    for title, cases in sets:
+        done = []
+        for _ in cases:
+            done.append(r := next(results))
+            print(f"{r.case.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects}, "
+                  f"gap cut {100 * r.gap_cut:.0f} %, hit {r.hit} ({r.seconds:.1f} s); noise true"
+                  " / estimated: " + ", ".join(f"{k} {r.noise_true[k]:.2g} / {r.noise_est[k]:.2g}"
+                                              for k in r.noise_true), flush=True)
+        text += [f"### {title}", "", table(done), "", summary(done), ""]
+    return text
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hdgym.discrepancy.holdout",
                                  description=__doc__.splitlines()[0])
@@ -470,26 +486,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:
         check_out(args.out, args.quick)
     sets = {"blind": list(BLIND), "holdout": holdout_cases(args.seed)}
-    chosen = ["blind", "holdout"] if args.set == "both" else [args.set]
-    chosen_cases = {w: [c for c in sets[w] if not args.only or c.name in args.only]
-                    for w in chosen}
-    runs = call_all([partial(run, c, quick=args.quick) for w in chosen
-                     for c in chosen_cases[w]], args.jobs)
-    text = []
-    for which in chosen:
-        results = []
-        for c in chosen_cases[which]:
-            r = next(runs)
-            print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
-                  f", NMSE {r.diagnosis.nmse_before:.3g} -> {r.diagnosis.nmse_after:.3g} % "
-                  f"(truth {r.truth:.3g} %, floor estimate {r.floor:.3g} %, gap cut "
-                  f"{100 * r.gap_cut:.0f} %), hit {r.hit} ({r.seconds:.1f} s); noise per "
-                  f"channel true / estimated: " + ", ".join(
-                      f"{k} {r.noise_true[k]:.2g} / {r.noise_est[k]:.2g}" for k in r.noise_true),
-                  flush=True)
-            results.append(r)
-        text += [f"### {which}", "", table(results), "", summary(results), ""]
-    out = "\n".join(text)
+    chosen = [(w, [c for c in sets[w] if not args.only or c.name in args.only])
+              for w in (["blind", "holdout"] if args.set == "both" else [args.set])]
+    runs = call_all([partial(run, c, quick=args.quick) for _, cs in chosen for c in cs], args.jobs)
+    out = "\n".join(sections(chosen, runs))
     print(out)
     if args.out:
         atomic_write_text(args.out, out + "\n")

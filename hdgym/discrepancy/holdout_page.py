@@ -13,8 +13,7 @@ from .holdout import (
     Blind,
     Result,
     holdout_cases,
-    summary,
-    table,
+    sections,
 )
 
 
@@ -130,12 +129,5 @@ def page_section(sets: list[tuple[str, list[Blind]]], results: Iterator[Result],
              "page: the set to judge by.", ""]
     if quick:
         parts += ["(A --quick run: the hold-out cases are skipped.)", ""]
-    for title, cases in sets:
-        done = []
-        for c in cases:
-            r = next(results)
-            print(f"{c.name}: {r.diagnosis.outcome}, found {r.diagnosis.missing_effects or 'none'}"
-                  f", hit {r.hit} ({r.seconds:.1f} s)", flush=True)
-            done.append(r)
-        parts += [f"### {title}", "", table(done), "", summary(done), ""]
+    parts += sections(sets, results)
     return "\n".join(parts) + "\n"
