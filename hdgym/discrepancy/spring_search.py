@@ -32,12 +32,12 @@ def views(problem: Problem, p: JointParams) -> tuple[str, ...]:
         return ()
     if problem.locked:
         return ("spring",)
-    if problem.line_channels() is None:
+    missing = [e for n, e in REGISTRY.items() if "lines" in e.compare
+               and lacks(p, n, problem.scales)]
+    if not missing or problem.line_channels() is None:  # the lines cost a pass over the record
         return ()
     shown = problem.view_scales("lines")  # the lines show a transmission error's own lines
-    missing = [n for n, e in REGISTRY.items() if "lines" in e.compare
-               and lacks(p, n, problem.scales) and e.testable(shown)]
-    return ("lines",) if missing else ()
+    return ("lines",) if any(e.testable(shown) for e in missing) else ()
 
 
 def search_view(problem: Problem, vprob: Problem | None, current: FitResult,
