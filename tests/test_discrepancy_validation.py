@@ -142,6 +142,7 @@ def test_effect_size_reads_the_effect_on_its_own_view(monkeypatch) -> None:
     view's. A view that does not apply to the record (the spring curve of a free output,
     line channels of a locked one) gives nothing."""
     from hdgym.discrepancy import truth as T
+    from hdgym.discrepancy.problem import Problem
 
     cases = {c.name: c for c in holdout.holdout_cases(362)}
     case = cases["hduc20 / nonlinear_stiffness / sine:1.86:0.5, locked, off 5 %"]
@@ -149,12 +150,15 @@ def test_effect_size_reads_the_effect_on_its_own_view(monkeypatch) -> None:
     train, _ = holdout.records(case, truth)
     base = holdout.unperturbed_base(case, truth)
     size, noise = holdout.effect_size(case, truth, train)
-    assert (size, noise) == T.view_size(train, truth, base, ("spring",))
-    assert T.view_size(train, truth, base, ("lines",)) is None
+    prob = Problem(train, truth)
+    assert (size, noise) == T.view_size(prob, truth, base, ("spring",))
+    assert prob.compare == "time" and prob.noise == prob.noise_time  # back on the time view
+    assert T.view_size(prob, truth, base, ("lines",)) is None
     monkeypatch.setattr(T, "view_size", lambda *a: None)
     tsize, tnoise = holdout.effect_size(case, truth, train)
     assert size / noise > 10 * tsize / tnoise > 0
     free = cases["hduc20 / kinematic_error / step:2.12, off 5 %"]
     ftruth = holdout.case_truth(free)
     ftrain, _ = holdout.records(free, ftruth)
-    assert T.view_size(ftrain, ftruth, holdout.unperturbed_base(free, ftruth), ("spring",)) is None
+    fprob = Problem(ftrain, ftruth)
+    assert T.view_size(fprob, ftruth, holdout.unperturbed_base(free, ftruth), ("spring",)) is None

@@ -314,7 +314,7 @@ def effect_size(case: Blind, truth: JointParams, train: Record, command: str | N
         runs.append(R.channels(raw, prob.names, prob.ratio, prob.dt, prob.cutoff))
     size = float(np.mean([100 * np.mean((runs[0][k] - runs[1][k]) ** 2) / prob.sigma2[k]
                           for k in prob.names]))
-    seen = T.view_size(train, truth, unperturbed_base(case, truth), REGISTRY[case.hidden].compare)
+    seen = T.view_size(prob, truth, unperturbed_base(case, truth), REGISTRY[case.hidden].compare)
     if seen is not None and seen[0] * prob.noise["mean"] > size * seen[1]:
         return seen
     return size, prob.noise["mean"]

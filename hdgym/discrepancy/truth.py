@@ -72,36 +72,37 @@ def true_noise_nmse(problem: Problem, clean: Record) -> dict[str, float]:
     return out
 
 
-def view_size(record: Record, truth: JointParams, without: JointParams,
+def view_size(problem: Problem, truth: JointParams, without: JointParams,
               views: tuple[str, ...]) -> tuple[float, float] | None:
-    """How much an effect changes ``record`` on the comparisons that reveal it, beside the
-    noise of each: ``(size, noise)``, NMSE percent, of the view where the change stands
-    highest above its noise (None: no view of ``views`` applies to the record).
+    """How much an effect changes ``problem``'s record on the comparisons that reveal it,
+    beside the noise of each: ``(size, noise)``, NMSE percent, of the view where the change
+    stands highest above its noise (None: no view of ``views`` applies to the record).
 
-    ``truth``: the joint the record was made with; ``without``: the same joint lacking the
-    effect. ``views``: the effect's declared comparisons (:attr:`.effect.Effect.compare`),
-    of which ``"time"`` is skipped: ``"spring"`` on a locked output (the binned spring
-    curve, where a hardening spring stands out although a linear stiffness absorbs it on
-    the time channels), ``"lines"`` on a free one (the line channels of the WG angle's
-    orders).
+    ``problem``: a comparison of the record on its time channels (switched to each view
+    and back: its noise estimate is made once); ``truth``: the joint the record was made
+    with; ``without``: the same joint lacking the effect. ``views``: the effect's declared
+    comparisons (:attr:`.effect.Effect.compare`), of which ``"time"`` is skipped:
+    ``"spring"`` on a locked output (the binned spring curve, where a hardening spring
+    stands out although a linear stiffness absorbs it on the time channels), ``"lines"`` on
+    a free one (the line channels of the WG angle's orders).
     Both joints are compared exactly as the diagnosis compares on that view
     (:meth:`.problem.Problem.residuals`, which subtract the same measurement).
     """
     best = None
-    for view in views:
-        if view == "time":
-            continue
-        prob = Problem(record, truth)
-        if view == "spring" and not prob.locked:
-            continue
-        try:
-            prob.set_compare(view)
-            a, b = prob.residuals(truth), prob.residuals(without)
-        except ValueError:  # no line channels in this record
-            continue
-        size = float(np.mean([100.0 * np.mean((a[k] - b[k]) ** 2) / prob.sigma2[k]
-                              for k in prob.names]))
-        noise = float(prob.noise["mean"])
-        if best is None or size * best[1] > best[0] * noise:
-            best = (size, noise)
+    try:
+        for view in views:
+            if view == "time" or view == "spring" and not problem.locked:
+                continue
+            try:
+                problem.set_compare(view)
+                a, b = problem.residuals(truth), problem.residuals(without)
+            except ValueError:  # no line channels in this record
+                continue
+            size = float(np.mean([100.0 * np.mean((a[k] - b[k]) ** 2) / problem.sigma2[k]
+                                  for k in problem.names]))
+            noise = float(problem.noise["mean"])
+            if best is None or size * best[1] > best[0] * noise:
+                best = (size, noise)
+    finally:
+        problem.set_compare("time")
     return best
