@@ -35,6 +35,35 @@ def test_a_fit_does_not_depend_on_how_many_threads_difference_it(monkeypatch, ce
     assert np.isfinite(one.cost)
 
 
+def test_a_fit_runs_on_one_blas_thread_and_gives_the_others_back(monkeypatch):
+    """Least squares factors a tall, narrow Jacobian each iteration: a second BLAS thread
+    does not speed that up and its spinning takes a core from the finite-difference columns
+    (:data:`.fitting.BLAS_THREADS`). Inside the fit BLAS runs on one thread; after it, on
+    as many as before."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas() -> set[int]:
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    truth = preset("tuttle-joint3")
+    rec = Simulator(truth).run("step:0.30", 0.5, seed=1)
+    fps = [FitParam(k, 0.5 * get_value(truth, k), 2.0 * get_value(truth, k)) for k in PATHS]
+    prob = Problem(rec, truth, segment=0.1)
+    seen: list[set[int]] = []
+    vector = prob.vector
+
+    def spy(p, decimate=1):
+        seen.append(blas())
+        return vector(p, decimate)
+
+    monkeypatch.setattr(prob, "vector", spy)
+    with threadpool_limits(limits=2, user_api="blas"):
+        F.fit(prob, truth, fps, max_nfev=2)
+        after = blas()
+    assert seen and all(s == {F.BLAS_THREADS} for s in seen)
+    assert after == {2}
+
+
 def test_central_differences_reach_the_optimum_where_forward_ones_stall():
     """A stick-slip record's cost is a staircase on the forward step's scale: least squares
     stops on it a long way short (development case hduc20 / stiction / sine:3.34:2 of seed

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from hdgym.params import JointParams
 
@@ -45,6 +46,14 @@ built for has two cores). The compiled simulation releases the GIL, so two colum
 once; each column is its own evaluation and their order is kept, so a fit's result does not
 depend on the number (tested). The bench's 60 s record: 48.6 -> 37.4 s, the same 5,081
 predictions."""
+BLAS_THREADS = 1
+"""BLAS threads a fit may use (for its duration, :func:`threadpoolctl.threadpool_limits`).
+Least squares factors a tall, narrow Jacobian (some 10^4 residuals by 10-40 parameters) each
+iteration, which a second thread does not speed up, and OpenBLAS's idle threads spin after
+each call on the cores the finite-difference columns (:data:`FD_THREADS`) run on. The bench's
+60 s record (tuttle-joint3 / kinematic_error / step:0.30), alone on the 2-core machine:
+64.1 s with OpenBLAS's default two threads (9.5 s of it in the Jacobian's SVD), 29.9 s with
+one (1.0 s). One thread also keeps a fit's sums in one order whatever the machine's cores."""
 DIFF_STEP = 1e-3
 """Forward finite-difference step, as a share of each parameter's range: the short fits
 (the base fit before the search, each step's control refit, the base refit on another
@@ -162,7 +171,8 @@ def fit(problem: Problem, p: JointParams, fps: list[FitParam], max_nfev: int = 4
     # staircase), then on the floored reading the record is judged on
     # (a comparison that never floors the model's angles, the inverse one, has one cost)
     for quantized in ((False, True) if central and _flooring(problem) else (True,)):
-        with readings(problem, quantized), ThreadPoolExecutor(FD_THREADS) as pool:
+        with (readings(problem, quantized), ThreadPoolExecutor(FD_THREADS) as pool,
+              threadpool_limits(limits=BLAS_THREADS, user_api="blas")):
             sol = least_squares(fun, z, jac="3-point" if central else "2-point",
                                 bounds=bounds, method="trf",
                                 diff_step=diff_step or (CENTRAL_STEP if central else DIFF_STEP),
