@@ -79,3 +79,81 @@ def test_a_simpler_form_wins_only_where_it_carries_over_better():
     assert better_on_validation(val, winner, [simpler, other]) is other
     assert val.calls == {"split": 1, "one": 1, "other": 1}
     assert better_on_validation(val, winner, []) is None
+
+
+def _fits_by_start(monkeypatch, costs: dict):
+    """``parsimony``'s refits on both records replaced: a fit from the model ``k`` ends at
+    cost ``costs[k]`` (its model named ``k + "*"``); rescoring keeps the cost."""
+    import hdgym.discrepancy.parsimony as P
+    from hdgym.discrepancy.fitting import FitResult
+
+    started = []
+
+    def converge(two, q, fps, nfev, **kw):
+        started.append((q, kw.get("search")))
+        assert isinstance(two, P.TwoRecords)
+        return FitResult(q + "*", {}, {"mean": 100 * costs[q]}, 1, costs[q])
+
+    monkeypatch.setattr(P, "converge", converge)
+    monkeypatch.setattr(P, "model_params", lambda q, scales, given: [])
+    monkeypatch.setattr(P, "rescored", lambda problem, r: r)
+    return started
+
+
+def _prob():
+    return SimpleNamespace(names=("motor_speed",), measured={}, stick_slip=True, scales=None)
+
+
+def test_nested_effects_are_decided_on_both_records_refitted_together(monkeypatch):
+    """The simpler effect (stiction) is named in place of the general one (Stribeck
+    friction) when, with the base model, both are refitted on both records together, it
+    achieves PARSIMONY of the general one's cut of their joint cost."""
+    from hdgym.discrepancy.parsimony import PARSIMONY, nested_on_both
+
+    started = _fits_by_start(monkeypatch, {"base": 1.0, "strib": 0.1, "stick": 0.12})
+    base = SimpleNamespace(params="base")
+    winner = (0.2, {"name": "stribeck_friction"}, SimpleNamespace(params="strib"))
+    simpler = (0.3, {"name": "stiction"}, SimpleNamespace(params="stick"))
+    got = nested_on_both(_prob(), _prob(), base, winner, simpler, None, 30)
+    assert got is not None and got[2].params == "stick*" and got[0] == 0.12
+    assert got[1]["name"] == "stiction" and got[1]["both_records_cut"] == 0.88
+    assert winner[1]["both_records_cut"] == 0.9
+    assert "both_records_cut" not in simpler[1]  # (a copy is named, the trial is kept)
+    # each from its own fit, with the coordinate search (stick-slip)
+    assert started == [("base", True), ("strib", True), ("stick", True)]
+    # short of PARSIMONY of the general one's cut: the general one stays
+    gain = 0.9
+    _fits_by_start(monkeypatch, {"base": 1.0, "strib": 0.1,
+                                 "stick": 1.0 - PARSIMONY * gain + 0.01})
+    assert nested_on_both(_prob(), _prob(), base, winner, simpler, None, 30) is None
+    # the general one not better than the base model refitted alike: nothing to prefer
+    _fits_by_start(monkeypatch, {"base": 0.1, "strib": 0.1, "stick": 0.1})
+    assert nested_on_both(_prob(), _prob(), base, winner, simpler, None, 30) is None
+
+
+def test_the_search_weighs_the_nested_effect_only_where_its_trial_nearly_matched(monkeypatch):
+    """:func:`.search._nested_instead`: only with a validation record, a trial of the
+    nested effect, and that trial within PARSIMONY of the winner's training cut."""
+    import hdgym.discrepancy.search as S
+    from hdgym.discrepancy.parsimony import PARSIMONY
+
+    calls = []
+    monkeypatch.setattr(S, "nested_on_both", lambda *a: calls.append(a) or ("picked",))
+    best = {"name": "stribeck_friction", "relative_improvement": 0.9}
+    near = (0.2, {"name": "stiction", "relative_improvement": PARSIMONY * 0.9}, None)
+    far = (0.2, {"name": "stiction", "relative_improvement": PARSIMONY * 0.9 - 0.01}, None)
+    cur = SimpleNamespace(cost=1.0)
+    ctrl = SimpleNamespace(cost=0.5)
+    pol = SimpleNamespace(cost=0.1)
+    args = (cur, [(0.1, best, pol), near], best, pol, None, 30)
+    assert S._nested_instead(_prob(), None, ctrl, *args) is None  # no validation record
+    assert S._nested_instead(_prob(), _prob(), ctrl, cur, [(0.1, best, pol), far], best, pol,
+                             None, 30) is None
+    other = {"name": "viscous_friction", "relative_improvement": 0.9}
+    assert S._nested_instead(_prob(), _prob(), ctrl, cur, [(0.1, other, pol), near], other,
+                             pol, None, 30) is None  # nothing nested in it
+    assert not calls
+    assert S._nested_instead(_prob(), _prob(), ctrl, *args) == ("picked",)
+    assert calls[0][2] is ctrl  # against the converged control, the better base fit
+    S._nested_instead(_prob(), _prob(), SimpleNamespace(cost=2.0), *args)
+    assert calls[1][2] is cur

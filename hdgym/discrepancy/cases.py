@@ -314,7 +314,9 @@ def main(argv: list[str] | None = None) -> int:
         "(`hdgym.discrepancy.search.THRESHOLD`, `MIN_GAIN`, `VALIDATION_GAIN`); a "
         "candidate must first explain >= 3 % of the residual (`MIN_SCORE`); stiction is "
         "preferred to Stribeck friction when it achieves >= 75 % of its improvement "
-        "(`hdgym.discrepancy.parsimony.PARSIMONY`); before an effect is named, a trial refit "
+        "(`hdgym.discrepancy.parsimony.PARSIMONY`; where Stribeck friction is about to be "
+        "named, of its cut of both records' cost, each refitted on both together, "
+        "`parsimony.nested_on_both`); before an effect is named, a trial refit "
         "that reaches half the relative cost reduction is judged after its polish (`NEAR`), "
         "against the base model refitted alike, on the training and the validation record, "
         "both refitted until they converge (`hdgym.discrepancy.settle.converge`).",

@@ -144,7 +144,11 @@ HOW_TO_READ = "\n".join([
     "- Stiction and Stribeck friction are nested (stiction is Stribeck friction with a "
     "vanishing Stribeck velocity). Between the two, the simpler one is preferred when it "
     "achieves 75 % of the other's improvement, judged on the validation record when "
-    "there is one (`parsimony.PARSIMONY`).",
+    "there is one (`parsimony.PARSIMONY`); where Stribeck friction is about to be named and "
+    "stiction's trial refit reached 75 % of its cut of the training cost, both (and the base "
+    "model) are refitted on the two records together and judged by that joint cost "
+    "(`parsimony.nested_on_both`): a record on which the joint hardly sticks cannot tell "
+    "the two apart.",
     "- Stiction on `breakaway_ramps` is the hardest tuned case: the stick-slip cost stays "
     "rough (the motor side slips in small steps while the spring winds up, each slip "
     "rings the lightly damped motor-spring mode), so the fitted stiffness and inertias "

@@ -11,7 +11,14 @@ from hdgym.params import JointParams
 from . import friction_fit as FF
 from .fitting import FitResult, fit, rescored
 from .outcome import NOISE_FACTOR, carries_over
-from .parsimony import NESTED, SIMPLER_FORMS, better_on_validation, simpler_does_nearly_as_well
+from .parsimony import (
+    NESTED,
+    PARSIMONY,
+    SIMPLER_FORMS,
+    better_on_validation,
+    nested_on_both,
+    simpler_does_nearly_as_well,
+)
 from .paths import reset_to
 from .problem import DRIFT, HORIZONS, Problem
 from .ranking import _start, rank_candidates
@@ -78,6 +85,24 @@ def _refit_forms(problem: Problem, current: FitResult, given: JointParams, winne
         out.append((r.cost, {**winner[1], "form": label,
                              "relative_improvement": _cut(current, r.cost)}, r))
     return out
+
+
+def _nested_instead(problem: Problem, vprob: Problem | None, ctrl: FitResult | None,
+                    current: FitResult, trials: list[tuple], best: dict, polished: FitResult,
+                    given: JointParams, nfev: int) -> tuple | None:
+    """The effect nested in ``best`` (:data:`.parsimony.NESTED`) to name in its place, as
+    ``(cost, entry, fit)``, where its trial refit reached :data:`.parsimony.PARSIMONY` of
+    ``best``'s cut of the training cost and it does nearly as well on both records refitted
+    together (:func:`.parsimony.nested_on_both`; ``ctrl``: the base model's converged
+    control where it was made); None without a validation record or such a trial."""
+    simpler = NESTED.get(best["name"])
+    mine = next((t for t in trials if t[1]["name"] == simpler), None)
+    if vprob is None or mine is None or not (
+            mine[1]["relative_improvement"] >= PARSIMONY * best["relative_improvement"]):
+        return None
+    base = ctrl if ctrl is not None and ctrl.cost < current.cost else current
+    return nested_on_both(problem, vprob, base, (polished.cost, best, polished), mine, given,
+                          nfev)
 
 
 def _cut(current: FitResult, cost: float) -> float:
@@ -209,6 +234,10 @@ def search_round(problem: Problem, vprob: Problem | None, current: FitResult,
                 reasons.append(why)
                 continue
         accepted = (best, polished, rel)
+        nested = _nested_instead(problem, vprob, ctrl, current, trials, best, polished,
+                                 params, nfev_polish)
+        if nested is not None:
+            accepted = (nested[1], nested[2], _cut(current, nested[0]))
         break
     if accepted is None:
         return None, "nothing (more) worth adding: " + "; ".join(reasons), candidates
