@@ -52,7 +52,10 @@ def nested_on_both(problem: Problem, vprob: Problem, base: FitResult, winner: tu
     validation records together until they converge (:class:`.settle.TwoRecords`, the
     coordinate search on a stick-slip record), and the simpler one is preferred when it
     achieves :data:`PARSIMONY` of the winner's cut of that joint cost. Returns the simpler
-    effect as ``(cost, entry, fit)``, its fit rescored on ``problem``, or None.
+    effect as ``(cost, entry, fit)``, its fit rescored on ``problem``, or None. (The fit
+    named then has seen the validation record, as :func:`.settle.settle_named`'s refit of
+    a named model that is not at its floor has; ``entry["both_records_cut"]`` and the
+    winner's say what each cut of the joint cost was.)
 
     Why not on the validation record alone (:func:`simpler_does_nearly_as_well`): a record
     on which the joint hardly sticks cannot tell stiction from Stribeck friction, and a
