@@ -73,8 +73,9 @@ def nested_on_both(problem: Problem, vprob: Problem, base: FitResult, winner: tu
 
     b, w, s = refit(base.params), refit(winner[2].params), refit(simpler[2].params)
     gain_w, gain_s = b.cost - w.cost, b.cost - s.cost
-    entry = {**simpler[1], "both_records_cut": round(gain_s / b.cost, 4) if b.cost > 0 else 0.0}
-    winner[1]["both_records_cut"] = round(gain_w / b.cost, 4) if b.cost > 0 else 0.0
+    share = 1.0 / b.cost if b.cost > 0 else 0.0  # a gain as a share of the base refit's cost
+    entry = {**simpler[1], "both_records_cut": round(gain_s * share, 4)}
+    winner[1]["both_records_cut"] = round(gain_w * share, 4)
     if not (gain_w > 0 and gain_s >= PARSIMONY * gain_w):
         return None
     fit = rescored(problem, s)
