@@ -84,6 +84,7 @@ def page_section(sets: list[tuple[str, list[Blind]]], results: Iterator[Result],
              "Outcomes: *named* when the final NMSE "
              f"is within {FLOOR_FACTOR:g} x what the final model shows on a record it made "
              "itself (its own floor, `hdgym.discrepancy.floor.floor_nmse`, mean over channels; "
+             "the base model's where that is lower, `hdgym.discrepancy.outcome.judge`; "
              "`hdgym.discrepancy.outcome.FLOOR_FACTOR`), else *named; rest unexplained*; with "
              "nothing named, *nothing missing* when the final NMSE is within "
              f"{NOISE_FACTOR:g} x the measurement-noise NMSE (`hdgym.discrepancy.noise`), or at "

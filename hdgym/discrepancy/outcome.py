@@ -260,7 +260,7 @@ def outcome_of(steps: list, final: float, noise: float, candidates: list[dict],
 
 def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, candidates: list[dict],
           untestable_why: dict[str, str], given: JointParams, stuck: dict[str, str],
-          alone: float | None = None
+          alone: float | None = None, base: JointParams | None = None
           ) -> tuple[str, list[str], dict[str, str], float | None]:
     """The outcome of a diagnosis whose final model ``p`` is judged on ``judged``.
 
@@ -269,7 +269,13 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
     level without), each channel is also checked on its own
     (:func:`.floor.unexplained_channels`, added to ``stuck``), and with nothing named the
     validation residual against the training record's alone (``alone``: that mean NMSE,
-    percent; :func:`carry_gap`). Returns ``(outcome, next
+    percent; :func:`carry_gap`). With an effect named, the floor the mean is judged against
+    is the lower of the named model's and the base model's ``base`` (the model before the
+    effects, as reported): a named model fitted into a setting whose own record compares
+    noisily raises its own floor, and would read as at it (development seed 398,
+    tuttle-joint1 / stiction / random:1.75:2: stiction named, validation NMSE 0.0229 %,
+    the named model's floor 0.0305 %, the base model's 0.0060 %, the joint that made the
+    records 0.0052 %: the rest is not at a floor). Returns ``(outcome, next
     experiments, unexplained channels, floor)`` (:func:`outcome_of`; floor None when it
     cannot be measured: an inverse comparison, a diverging run).
     """
@@ -277,6 +283,9 @@ def judge(judged: Problem, p: JointParams, fps: list[FitParam], steps: list, can
     final = final_channels["mean"]
     fl = floor_nmse(judged, p)
     floor = _channel_mean(fl)  # mean_floor, with the channels kept for the checks below
+    if steps and base is not None and floor is not None:
+        other = mean_floor(judged, base)
+        floor = floor if other is None else min(floor, other)
     stuck = dict(stuck)
     untested_only = lacks_only_untestable(p, untestable_why, judged.scales)
     # the mean can hide one channel that alone shows what the model lacks

@@ -380,7 +380,8 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
         candidates, untestable_why, params,
-        {**spring_stuck, **({} if steps else partial_evidence(seen + candidates))}, alone)
+        {**spring_stuck, **({} if steps else partial_evidence(seen + candidates))}, alone,
+        base=before.params)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
     # the whole record, compared once for both fits (building the comparison, its noise
