@@ -599,6 +599,11 @@ def test_a_candidate_that_explains_part_of_the_residual_is_not_nothing_missing()
     assert out == "unexplained" and nxt[0] == "hdgym experiment current_sine"
     # without that evidence the same residual is nothing missing
     assert partial_evidence([{"name": "stiction"}]) == {}
+    # nor from a candidate the record's noise would hide at the size it suggests: its cut
+    # is slack its parameters take up
+    hidden = {"stribeck_friction": "below the measurement noise"}
+    assert partial_evidence(cands, hidden) == {}
+    assert list(partial_evidence(cands, {"stiction": "x"})) == ["candidate:stribeck_friction"]
     assert _outcome([], 0.5 * RESOLVED, 0.001, cands, {}, base, {})[0] == "nothing missing"
 
 

@@ -377,10 +377,10 @@ def _one_way(record: Record, params: JointParams, validate: Record | None, *,
         current, before, words = both
         conclusion += words
     where_before = _where(problem, before.params)
+    evidence = {} if steps else partial_evidence(seen + candidates, untestable_why)
     outcome, nexts, stuck, floor = judge(
         judged, current.params, model_params(current.params, judged.scales, params), steps,
-        candidates, untestable_why, params,
-        {**spring_stuck, **({} if steps else partial_evidence(seen + candidates))}, alone,
+        candidates, untestable_why, params, {**spring_stuck, **evidence}, alone,
         base=before.params)
     if stuck:
         conclusion += ("; what remains is not noise on " + "; ".join(stuck.values()))
