@@ -116,16 +116,20 @@ def short_start(problem, p: JointParams, fps: list[FitParam], nfev: int,
         return converge(problem, p, fps, nfev, rounds=rounds).params
 
 
-def short_converge(problem, p: JointParams, given: JointParams, nfev: int) -> FitResult | None:
+def short_converge(problem, p: JointParams, given: JointParams, nfev: int,
+                   search: bool = False) -> FitResult | None:
     """``p`` refitted until it converges on the record's horizon from :func:`short_start`
     first, each fit over the parameters and bounds of the model it starts from
     (:func:`.registry.model_params`: an anchored bound widens to take in where the short fit
-    went). None where :func:`short_start` is None. The strong control an effect must beat
-    (:func:`.search.search_round`) and the settled base model (:func:`settle`)."""
+    went; ``search``: the last with :func:`converge`'s coordinate search). None where
+    :func:`short_start` is None. The strong control an effect must beat
+    (:func:`.search.search_round`) and the settled base model (:func:`settle`, on the
+    training record and on both records)."""
     start = short_start(problem, p, model_params(p, problem.scales, given), nfev)
     if start is None:
         return None
-    return converge(problem, start, model_params(start, problem.scales, given), nfev)
+    return converge(problem, start, model_params(start, problem.scales, given), nfev,
+                    search=search)
 
 
 def _shortens(q) -> bool:
@@ -141,6 +145,7 @@ class TwoRecords:
 
     def __init__(self, train: Problem, validation: Problem) -> None:
         self.parts = (train, validation)
+        self.scales = train.scales  # the training record's, as the parameters are taken
         self.names = train.names
         self.measured = train.measured
         self.stick_slip = train.stick_slip or validation.stick_slip
@@ -210,10 +215,9 @@ def settle(problem: Problem, vprob: Problem | None, current: FitResult, given: J
         return current, conclusion, alone
     two = TwoRecords(problem, vprob)
     both = converge(two, current.params, fps, nfev, search=True)
-    start = short_start(two, current.params, fps, nfev)  # as the training refit above
-    if start is not None:
-        alt = converge(two, start, model_params(start, problem.scales, given), nfev, search=True)
-        both = alt if alt.cost < both.cost else both
+    alt = short_converge(two, current.params, given, nfev, search=True)  # as above
+    if alt is not None and alt.cost < both.cost:
+        both = alt
     v_both = vprob.nmse(both.params)["mean"]
     if not v_both < v_now:
         return current, conclusion, alone
