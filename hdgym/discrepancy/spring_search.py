@@ -101,8 +101,8 @@ def search_view(problem: Problem, vprob: Problem | None, current: FitResult,
     converging, the stiffness 36,208 -> 46,123 N m/rad against 24,314; from there the kinematic
     error's trial cut nothing and the case read *unexplained*; from the one refit it is named
     with 85 % of the gap cut). The spring curve keeps the one short refit: converged on one
-    record's few dozen bin means it overfits them (seed 362 above then read *unexplained* after
-    the refit on both records).
+    record's few dozen bin means it overfits them (seed 362 above: its curve then stayed
+    unexplained after the refit on both records).
     """
     probs = [problem] + ([vprob] if vprob is not None else [])
     try:
